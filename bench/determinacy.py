@@ -137,7 +137,8 @@ def real_camera_sets() -> list[tuple[str, object, bool, dict]]:
     """(name, views, critical, intrinsics ranges) of the real camera sets present: the
     Middlebury dino's hemisphere (random 20 of its 363 views; a general motion, f = 3310 px beyond
     the default ranges), templeRing (20 of its 47 ring views, the issue's example, and its first
-    20), dinoSparseRing, the Oxford Model House and Corridor (critical or near-critical)."""
+    20), templeSparseRing (16 views of the same ring, fetched with its photos), dinoSparseRing, the
+    Oxford Model House and Corridor (critical or near-critical)."""
     from geocert.solvers import datasets
 
     found = []
@@ -155,6 +156,9 @@ def real_camera_sets() -> list[tuple[str, object, bool, dict]]:
             found.append((f"templeRing, 20 views (seed {seed})",
                           views.subset(np.random.default_rng(seed).choice(47, 20, replace=False)), True, {}))
         found.append(("templeRing, first 20 views", views.subset(range(20)), True, {}))
+    if (BENCH_DATA / "middlebury_templeSparseRing").exists():  # bench.fetch_photo_sets fetches it
+        found.append(("templeSparseRing, 16 views", datasets.load_middlebury(BENCH_DATA / "middlebury_templeSparseRing"),
+                      True, {}))
     if (SHARED_DATA / "middlebury_dinoSparseRing").exists():
         found.append(("dinoSparseRing, 14 views", datasets.load_middlebury(SHARED_DATA / "middlebury_dinoSparseRing"),
                       True, {"focal": [1000.0, 6000.0]}))
@@ -198,10 +202,11 @@ def real_autocalibration(noise_px: float = 0.5) -> tuple[dict, list[str]]:
 def real_track_scenes(rng, noise_px: float, count: int) -> list[tuple[str, np.ndarray, list, np.ndarray]]:
     """(name, cameras, tracks, true points) on real camera sets: the Dinosaur's 36 cameras with its
     own tracks (their certified points taken as the truth), the Model House's cameras with its 3D
-    points and which views see them, dinoSparseRing's and templeRing's cameras with points drawn
-    in the box they state, each seen by 2 to 6 consecutive views of the ring; every observation
-    the truth's projection plus noise_px of noise; and the Model House's own measured corners
-    against its published 3D points (a reconstruction, not a survey). Up to ``count`` tracks a set."""
+    points and which views see them, dinoSparseRing's, templeRing's and templeSparseRing's cameras
+    with points drawn in the box they state, each seen by 2 to 6 consecutive views of the ring;
+    every observation the truth's projection plus noise_px of noise; and the Model House's own
+    measured corners against its published 3D points (a reconstruction, not a survey). Up to
+    ``count`` tracks a set."""
     from geocert.solvers import datasets
 
     found, observed = [], []
@@ -228,7 +233,8 @@ def real_track_scenes(rng, noise_px: float, count: int) -> list[tuple[str, np.nd
             {"views": seen[i], "points": [corners[(v, i)].tolist() for v in seen[i]]} for i in chosen],
             points[chosen]))
     rings = [("dinoSparseRing, 16 views", SHARED_DATA / "middlebury_dinoSparseRing"),
-             ("templeRing, 47 views", BENCH_DATA / "middlebury_templeRing_cameras")]
+             ("templeRing, 47 views", BENCH_DATA / "middlebury_templeRing_cameras"),
+             ("templeSparseRing, 16 views", BENCH_DATA / "middlebury_templeSparseRing")]
     for name, directory in rings:
         if not directory.exists():
             continue
