@@ -3,8 +3,10 @@ promises (issue 37). Real sets: the Oxford Dinosaur (a turntable), the Oxford Mo
 round a house), the Oxford Corridor (a forward walk), Middlebury's dinoSparseRing, templeRing and
 templeSparseRing (rings; templeRing's views half turned upside down; templeSparseRing is 16 views of
 the same ring, f = 1520 px, fetched with its photos by `python -m bench.fetch_photo_sets --sets
-templeSparseRing`) and the full Middlebury dino (363 views over a hemisphere: a general motion).
-Credit: Oxford Visual Geometry Group; Seitz, Curless, Diebel, Scharstein and Szeliski (CVPR 2006).
+templeSparseRing`), the full Middlebury dino (363 views over a hemisphere: a general motion) and
+two KITTI odometry excerpts (a car driving straight, and through a right turn: `--sets
+kittiStraight,kittiTurn`). Credit: Oxford Visual Geometry Group; Seitz, Curless, Diebel, Scharstein
+and Szeliski (CVPR 2006); Geiger, Lenz and Urtasun (CVPR 2012, CC BY-NC-SA 3.0).
 A set that is absent skips, naming its path (the shared sets fail instead where the run requires
 them, as CI's does).
 
@@ -27,6 +29,7 @@ from geocert.solvers import datasets
 from geocert.solvers.autocalibration import scenes
 from geocert.formulations.autocalibration import determinacy
 from geocert.core.determinacy import fixes
+from testing import photo_sets
 from tests.support import shared_data
 
 BENCH_DATA = Path(os.environ.get("GEOCERT_BENCH_DATA") or Path(__file__).resolve().parents[4] / "bench-data")
@@ -45,6 +48,17 @@ def temple() -> datasets.CalibratedViews:
 
 def temple_sparse_ring() -> datasets.CalibratedViews:
     return datasets.load_middlebury(needs(BENCH_DATA / "middlebury_templeSparseRing"))
+
+
+def ground_truth_motion(key: str) -> tuple[np.ndarray, np.ndarray]:
+    """A fetched photo set's ground-truth rotations and centres, in file order (testing.photo_sets;
+    `python -m bench.fetch_photo_sets --sets KEY` fetches it)."""
+    try:
+        chosen = photo_sets.load(key)
+    except photo_sets.MissingSet as missing:
+        pytest.skip(str(missing))
+    cameras = [chosen.truth[name] for name in chosen.names]
+    return np.array([c.R for c in cameras]), np.array([c.center for c in cameras])
 
 
 def dino_hemisphere() -> datasets.CalibratedViews:
@@ -136,6 +150,16 @@ class TestRotationsOnly:
         fetches): critical, as its 47 views are."""
         ring = temple_sparse_ring()
         assert judged(ring.R, ring.centres) == ["orbital_motion"]
+
+    def test_a_car_driving_straight_is_a_pure_translation(self):
+        """KITTI's straight excerpt (26 frames over 60 m, 1.3 degrees of rotation in all): a
+        forward walk, which leaves the calibration undetermined."""
+        assert judged(*ground_truth_motion("kittiStraight")) == ["pure_translation"]
+
+    def test_a_car_turning_on_a_flat_road_is_critical(self):
+        """KITTI's turn (98 degrees, every rotation about the road's normal): a planar motion,
+        critical for a constant K whatever the path's shape."""
+        assert judged(*ground_truth_motion("kittiTurn")) == ["orbital_motion"]
 
     def test_the_dinosaur_turntable_is_critical(self):
         R, centres = dinosaur_rotations()
