@@ -13,13 +13,21 @@ Sets, where they come from, and their owners (credit them when you use them):
   the folder ``images`` of https://github.com/openMVG/ImageDataset_SceauxCastle (source
   ``sceaux``: a git URL or path). The repository states no licence beyond the copyright notice of
   its Readme.txt: the photos are read, never shipped.
+- ``dinoCameras``: the Middlebury "dino" set's ground-truth cameras alone (same authors as above):
+  363 views over a hemisphere, ``dino_par.txt`` and its README (no photos), from the folder
+  ``dino`` of a public course repository that keeps a copy,
+  https://github.com/mervkilcgil/Optimization-of-3-D-Reconstruction-from-Multiple-View-Images
+  (source ``dino_cameras``: a git URL or path); that copy's first line names the columns where
+  Middlebury's states the count, which the reader skips either way. The autocalibration's
+  critical-motion tests and bench.determinacy read it as a general motion.
 - ``kittiStraight`` and ``kittiTurn``: KITTI odometry benchmark excerpts (Geiger, Lenz and Urtasun,
   CVPR 2012; CC BY-NC-SA 3.0, non-commercial), the folders KITTI_sequence_1 and KITTI_sequence_2
   (image_l, calib.txt, poses.txt) of https://github.com/niconielsen32/VisualSLAM (source
   ``kitti``: a git URL or path).
 
 Each source is overridable: an argument (``sources``), else the environment variable
-GEOCERT_FETCH_MIDDLEBURY, GEOCERT_FETCH_SCEAUX or GEOCERT_FETCH_KITTI, else the public address.
+GEOCERT_FETCH_MIDDLEBURY, GEOCERT_FETCH_SCEAUX, GEOCERT_FETCH_KITTI or GEOCERT_FETCH_DINO_CAMERAS,
+else the public address.
 Only the files the manifest names are taken (a git source's other files are not even downloaded:
 a shallow, blob-less clone checks out those paths alone), laid out as photo_sets reads them. The
 set is written in a temporary folder inside the data root and renamed into place once every file
@@ -46,9 +54,10 @@ DEFAULT_SOURCES = {
     "middlebury": "https://vision.middlebury.edu/mview/data/data/",
     "sceaux": "https://github.com/openMVG/ImageDataset_SceauxCastle",
     "kitti": "https://github.com/niconielsen32/VisualSLAM",
+    "dino_cameras": "https://github.com/mervkilcgil/Optimization-of-3-D-Reconstruction-from-Multiple-View-Images",
 }
 ENVIRONMENT = {"middlebury": "GEOCERT_FETCH_MIDDLEBURY", "sceaux": "GEOCERT_FETCH_SCEAUX",
-               "kitti": "GEOCERT_FETCH_KITTI"}
+               "kitti": "GEOCERT_FETCH_KITTI", "dino_cameras": "GEOCERT_FETCH_DINO_CAMERAS"}
 
 # Per set: its folder under the data root, its source, and where its files are in that source (the
 # zip file's name, or the folder of the git repository).
@@ -59,6 +68,7 @@ SETS = {
     "sceaux": {"folder": "sceaux_castle", "source": "sceaux", "subfolder": "images"},
     "kittiStraight": {"folder": "kitti_sequence_1", "source": "kitti", "subfolder": "KITTI_sequence_1"},
     "kittiTurn": {"folder": "kitti_sequence_2", "source": "kitti", "subfolder": "KITTI_sequence_2"},
+    "dinoCameras": {"folder": "middlebury_dino_cameras", "source": "dino_cameras", "subfolder": "dino"},
 }
 
 

@@ -3,12 +3,12 @@ promises (issue 37). Real sets: the Oxford Dinosaur (a turntable), the Oxford Mo
 round a house), the Oxford Corridor (a forward walk), Middlebury's dinoSparseRing, templeRing and
 templeSparseRing (rings; templeRing's views half turned upside down; templeSparseRing is 16 views of
 the same ring, f = 1520 px, fetched with its photos by `python -m bench.fetch_photo_sets --sets
-templeSparseRing`), the full Middlebury dino (363 views over a hemisphere: a general motion) and
-two KITTI odometry excerpts (a car driving straight, and through a right turn: `--sets
-kittiStraight,kittiTurn`). Credit: Oxford Visual Geometry Group; Seitz, Curless, Diebel, Scharstein
-and Szeliski (CVPR 2006); Geiger, Lenz and Urtasun (CVPR 2012, CC BY-NC-SA 3.0).
-A set that is absent skips, naming its path (the shared sets fail instead where the run requires
-them, as CI's does).
+templeSparseRing`), the full Middlebury dino (363 views over a hemisphere: a general motion; its
+cameras alone, `--sets dinoCameras`) and two KITTI odometry excerpts (a car driving straight, and
+through a right turn: `--sets kittiStraight,kittiTurn`). Credit: Oxford Visual Geometry Group;
+Seitz, Curless, Diebel, Scharstein and Szeliski (CVPR 2006); Geiger, Lenz and Urtasun (CVPR 2012,
+CC BY-NC-SA 3.0). A set that is absent skips, naming its path (the shared sets fail instead where
+the run requires them, as CI's does).
 
 The decision comes from the data's conditioning (autocalibration/determinacy.py): so the same
 ring is critical at one noise level and not at another, and a ring whose cameras tilt enough is
@@ -38,7 +38,8 @@ BENCH_DATA = Path(os.environ.get("GEOCERT_BENCH_DATA") or Path(__file__).resolve
 def needs(path: Path) -> Path:
     """A set of the benchmark data (GEOCERT_BENCH_DATA), which is not among the shared data."""
     if not path.exists():
-        pytest.skip(f"{path} is absent (a real camera set: see its SOURCE.txt)")
+        pytest.skip(f"{path} is absent (a real camera set: `python -m bench.fetch_photo_sets` fetches the "
+                    "fetchable ones; see this module's docstring)")
     return path
 
 
