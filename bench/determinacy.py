@@ -133,6 +133,12 @@ def autocalibration(n: int, rng) -> tuple[dict, int, int]:
     return rows, flagged, ring_flagged
 
 
+def temple_ring_cameras() -> Path:
+    """templeRing's cameras' folder, else its photo set's (which holds the same templeR_par.txt)."""
+    folder = BENCH_DATA / "middlebury_templeRing_cameras"
+    return folder if folder.exists() else BENCH_DATA / "middlebury_templeRing"
+
+
 def real_camera_sets() -> list[tuple[str, object, bool, dict]]:
     """(name, views, critical, intrinsics ranges) of the real camera sets present: the
     Middlebury dino's hemisphere (random 20 of its 363 views; a general motion, f = 3310 px beyond
@@ -149,7 +155,7 @@ def real_camera_sets() -> list[tuple[str, object, bool, dict]]:
             found.append((f"dino hemisphere, 20 views (seed {seed})",
                           views.subset(np.random.default_rng(seed).choice(363, 20, replace=False)), False,
                           {"focal": [1000.0, 6000.0]}))
-    temple = BENCH_DATA / "middlebury_templeRing_cameras"
+    temple = temple_ring_cameras()
     if temple.exists():
         views = datasets.load_middlebury(temple)
         for seed in (1, 2, 3):
@@ -233,7 +239,7 @@ def real_track_scenes(rng, noise_px: float, count: int) -> list[tuple[str, np.nd
             {"views": seen[i], "points": [corners[(v, i)].tolist() for v in seen[i]]} for i in chosen],
             points[chosen]))
     rings = [("dinoSparseRing, 16 views", SHARED_DATA / "middlebury_dinoSparseRing"),
-             ("templeRing, 47 views", BENCH_DATA / "middlebury_templeRing_cameras"),
+             ("templeRing, 47 views", temple_ring_cameras()),
              ("templeSparseRing, 16 views", BENCH_DATA / "middlebury_templeSparseRing")]
     for name, directory in rings:
         if not directory.exists():
