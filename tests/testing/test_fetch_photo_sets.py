@@ -18,6 +18,7 @@ from testing import fetch_photo_sets, photo_sets
 MIRRORS = Path(os.environ.get("GEOCERT_MIRRORS", "/work/.mirror"))
 KITTI_MIRROR = MIRRORS / "niconielsen32+VisualSLAM" / "repo"
 SCEAUX_MIRROR = MIRRORS / "openMVG+ImageDataset_SceauxCastle" / "repo"
+DINO_CAMERAS_MIRROR = MIRRORS / "mervkilcgil+Optimization-of-3-D-Reconstruction-from-Multiple-View-Images" / "repo"
 BENCH_DATA = photo_sets.data_root()
 
 
@@ -191,6 +192,22 @@ def test_a_github_set_from_its_mirror_reads_as_the_bench_copy(key, source, mirro
     except photo_sets.MissingSet as missing:
         pytest.skip(f"fetched and checked; not compared: {missing}")
     same_set(fetched, bench)
+
+
+def test_the_dino_cameras_from_their_mirror_read_as_363_cameras_over_a_hemisphere(tmp_path):
+    """A camera set with no photos: exactly the manifest's files, read by the Middlebury reader
+    as the dino's 363 views (f 3310.4 px) and the box its README states."""
+    from geocert.solvers import datasets
+
+    needs(DINO_CAMERAS_MIRROR)
+    where = fetch_photo_sets.fetch("dinoCameras", tmp_path, {"dino_cameras": str(DINO_CAMERAS_MIRROR)},
+                                   log=lambda *_: None)
+    assert fetch_photo_sets.folder_records(where) == fetch_photo_sets.read_manifest()["sets"]["dinoCameras"]["files"]
+    views = datasets.load_middlebury(where)
+    assert len(views.names) == 363 and views.names[0] == "dino0001.png"
+    assert np.allclose(views.K[:, 0, 0], 3310.4) and views.box is not None
+    spread = np.linalg.svd(views.centres - views.centres.mean(axis=0), compute_uv=False)
+    assert spread[2] > 0.3 * spread[0]  # not one ring (whose centres are flat: 0.001 of their spread)
 
 
 def test_a_changed_file_in_a_git_source_is_refused(tmp_path):
