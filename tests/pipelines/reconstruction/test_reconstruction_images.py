@@ -87,7 +87,7 @@ class TestDecode:
 # Tracks
 
 
-class TestUnionFind:
+class TestTrackGroups:
     def test_inconsistent_track_dropped(self):
         # Track A: (0,0)-(1,0)-(2,0) and a wrong match (0,0)-(2,1): view 2 twice -> dropped whole.
         # Track B: (0,1)-(1,1)-(2,2) consistent. Track C: (1,2)-(2,3) (two views, kept).
@@ -102,6 +102,53 @@ class TestUnionFind:
         kept, counts = build_tracks(matches, [2, 2, 1], min_track_length=3)
         assert kept == [[(0, 0), (1, 0), (2, 0)]]
         assert counts["dropped_short"] == 1
+
+    def test_no_matches_no_tracks(self):
+        assert build_tracks({}, [3, 4]) == ([], {"tracks_built": 0, "dropped_inconsistent": 0,
+                                                 "dropped_short": 0, "tracks_kept": 0})
+
+    @pytest.mark.parametrize("seed", range(6))
+    def test_the_groups_are_a_union_finds(self, seed):
+        """Random match graphs (chains across views, repeated matches, features matched twice in a
+        view) grouped as a plain union-find over the same links groups them."""
+        rng = np.random.default_rng(seed)
+        per_view = rng.integers(60, 120, size=int(rng.integers(3, 7))).tolist()
+        links = {}
+        for _ in range(40):  # scene points seen in 2 or more views, linked view to next view
+            views = np.sort(rng.choice(len(per_view), size=int(rng.integers(2, len(per_view) + 1)), replace=False))
+            keypoints = [int(rng.integers(0, per_view[v])) for v in views]
+            for a in range(len(views) - 1):
+                links.setdefault((int(views[a]), int(views[a + 1])), []).append((keypoints[a], keypoints[a + 1]))
+        for i in range(len(per_view)):  # wrong matches
+            for j in range(i + 1, len(per_view)):
+                for _ in range(int(rng.integers(0, 6))):
+                    links.setdefault((i, j), []).append((int(rng.integers(0, per_view[i])), int(rng.integers(0, per_view[j]))))
+        matches = {pair: np.array(rows) for pair, rows in links.items()}
+        nodes = [(v, k) for v, n in enumerate(per_view) for k in range(n)]
+        parent = {node: node for node in nodes}
+
+        def find(a):
+            while parent[a] != a:
+                a = parent[a]
+            return a
+
+        linked = set()
+        for (i, j), rows in matches.items():
+            for a, b in rows.tolist():
+                linked.update({(i, a), (j, b)})
+                ra, rb = find((i, a)), find((j, b))
+                if ra != rb:
+                    parent[max(ra, rb)] = min(ra, rb)
+        groups = {}
+        for node in sorted(linked):
+            groups.setdefault(find(node), []).append(node)
+        for min_length in (2, 3):
+            consistent = [g for g in groups.values() if len({v for v, _ in g}) == len(g)]
+            expected = sorted(g for g in consistent if len(g) >= min_length)
+            kept, counts = build_tracks(matches, per_view, min_track_length=min_length)
+            assert kept == expected
+            assert counts == {"tracks_built": len(groups), "dropped_inconsistent": len(groups) - len(consistent),
+                              "dropped_short": len(consistent) - len(expected), "tracks_kept": len(expected)}
 
 
 @pytest.fixture(scope="module")
