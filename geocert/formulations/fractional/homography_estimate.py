@@ -9,9 +9,8 @@ and a verifier holding them to that much could not tell an interval collapsed on
 (review 37 class 3). Here every step is an IEEE operation in an order of its own: the normalisers
 from correctly rounded sums (math.fsum), the normalised map computed exactly and rounded once, the
 parameters' basis a Householder reflection (fractional.normalisation, shared with a resection's
-estimate), the Jacobian analytic (elementwise numpy and
-fixed_order.mul), J'J by fixed_order.mul and its eigendecomposition by fixed_order.symmetric_eigen;
-so the writer and the verifier, which recomputes the estimate by this function, read one width.
+estimate), the Jacobian analytic (elementwise numpy and fixed_order.mul), J'J by fixed_order.mul
+and its eigendecomposition by fixed_order.symmetric_eigen; so the writer and the verifier, which recomputes the estimate by this function, read one width.
 """
 
 from __future__ import annotations
