@@ -366,21 +366,6 @@ def prove_map(source: np.ndarray, target: np.ndarray, matrix, cost: float, lower
     return sublevel
 
 
-def _complement(M: np.ndarray) -> np.ndarray:
-    """An orthonormal basis (columns) of the directions orthogonal to vec(M)."""
-    v = M.ravel() / np.linalg.norm(M)
-    return np.linalg.svd(v[None, :])[2][1:].T
-
-
-def _normaliser(points: np.ndarray) -> np.ndarray:
-    centre = points.mean(axis=0)
-    scale = np.sqrt(2.0) / max(float(np.linalg.norm(points - centre, axis=1).mean()), 1e-300)
-    T = np.eye(points.shape[1] + 1)
-    T[:-1, :-1] *= scale
-    T[:-1, -1] = -scale * centre
-    return T
-
-
 def map_level(source: np.ndarray, target: np.ndarray, matrix, cost: float | None, lower: float | None) -> float:
     """An L2L2 resection's level, the one its estimate, its proven interval and the verifier read:
     3^2 times the exact squared residuals over 2k - 11, at least the certified gap."""
@@ -405,35 +390,39 @@ def map_(source: np.ndarray, target: np.ndarray, matrix: list[list[float]] | Non
         return homography(source, target, M, cost, lower)
     # Parameters in normalised coordinates (centroid 0, mean distance sqrt 2 on both sides), where
     # the map's entries are of one size: in pixels they span orders of magnitude, and J'J's
-    # smallest eigenvalue would look singular for that reason alone.
-    Ts, Tt = _normaliser(source), _normaliser(target)
-    Tt_inv = np.linalg.inv(Tt)
-    normalised = Tt @ M @ np.linalg.inv(Ts)
-    normalised = normalised / np.linalg.norm(normalised)
-    basis = _complement(normalised)
-    source_h = np.hstack([source, np.ones((len(source), 1))])
+    # smallest eigenvalue would look singular for that reason alone. The residuals and the centre
+    # are read in that frame too (the normalised points against the normalised map, computed
+    # exactly: fractional.normalisation), so the width does not depend on where the data sit: read
+    # in the world's coordinates, a central difference of residuals rounded at eps of the data's
+    # offset moved the width by multiples of itself 1e8 off the origin over a spread of 1e-3
+    # (review 59 class 6).
+    from geocert.formulations.fractional.normalisation import complement, normalised_map
 
-    def matrix_of(theta):
-        return Tt_inv @ (normalised + (basis @ theta).reshape(M.shape)) @ Ts
+    (cs, ss), (ct, st), normalised = normalised_map(source, target, M)
+    basis = complement(normalised.ravel())
+    xs = np.hstack([ss * (source - cs), np.ones((len(source), 1))])  # the normalised source points
+    ts = st * (target - ct)  # and targets
 
     def residuals(theta):
-        image = source_h @ matrix_of(theta).T
-        return (image[:, :-1] / image[:, -1:] - target).ravel()
+        # the pixel residuals, (normalised image - normalised target) / st
+        image = xs @ (normalised + (basis @ theta).reshape(M.shape)).T
+        return ((image[:, :-1] / image[:, -1:] - ts) / st).ravel()
 
     zero = np.zeros(basis.shape[1])
     J = numeric_jacobian(residuals, zero)
     quantities = {}
-    Ts_inv = np.linalg.inv(Ts)
 
-    def centre(theta):
-        # the null vector of the normalised map (entries of one size), taken back to the world:
-        # the pixel-world camera's SVD rounds its centre at 1e-10 of itself far out
-        C = Ts_inv @ np.linalg.svd(normalised + (basis @ theta).reshape(M.shape))[2][-1]
-        return C[:3] / C[3]
+    def offset(theta):
+        # the centre's offset from the source centroid, in the world's units: the null vector of the
+        # normalised map (entries of one size) over the source's scale (the pixel-world camera's SVD
+        # rounds its centre at 1e-10 of itself far out)
+        C = np.linalg.svd(normalised + (basis @ theta).reshape(M.shape))[2][-1]
+        return C[:3] / (C[3] * ss)
 
-    value = centre(zero)
-    gradient = numeric_jacobian(centre, zero)
-    distance = float(np.linalg.norm(value - source.mean(axis=0)))  # the centre known to a tenth of it
+    local = offset(zero)
+    value = cs + local
+    gradient = numeric_jacobian(offset, zero)
+    distance = float(np.linalg.norm(local))  # the centre known to a tenth of it
     for k, name in enumerate(("centre_x", "centre_y", "centre_z")):
         quantities[name] = (float(value[k]), gradient[k], distance)
     out = curvature_intervals(J, residuals(zero), quantities, certified_gap(cost, lower),

@@ -8,66 +8,23 @@ the interval's width apart between OpenBLAS's Haswell and Prescott kernels (revi
 and a verifier holding them to that much could not tell an interval collapsed onto its value
 (review 37 class 3). Here every step is an IEEE operation in an order of its own: the normalisers
 from correctly rounded sums (math.fsum), the normalised map computed exactly and rounded once, the
-parameters' basis a Householder reflection, the Jacobian analytic (elementwise numpy and
-fixed_order.mul), J'J by fixed_order.mul and its eigendecomposition by fixed_order.symmetric_eigen;
-so the writer and the verifier, which recomputes the estimate by this function, read one width.
+parameters' basis a Householder reflection (fractional.normalisation, shared with a resection's
+estimate), the Jacobian analytic (elementwise numpy and fixed_order.mul), J'J by fixed_order.mul
+and its eigendecomposition by fixed_order.symmetric_eigen; so the writer and the verifier, which recomputes the estimate by this function, read one width.
 """
 
 from __future__ import annotations
 
 import math
-from fractions import Fraction
 
 import numpy as np
 
 from geocert.core.determinacy import SINGULAR, Determinacy, certified_gap, cost_increase, interval, spread
 from geocert.core.exact import exact_centroid_image, exact_squared_residuals
-from geocert.formulations.fractional.fixed_order import mul, norm, symmetric_eigen
+from geocert.formulations.fractional.fixed_order import mul, symmetric_eigen
+from geocert.formulations.fractional.normalisation import complement, normalised_map
 
 FLAT = 1e-2  # fractional.determinacy.FLAT: points whose centred spread along a direction is below this
-
-
-def _normaliser(points: np.ndarray) -> tuple[np.ndarray, float]:
-    """The centroid and the scale putting the points' mean distance from it at sqrt 2, each from
-    correctly rounded sums (the same floats whatever the machine's reductions); ArithmeticError
-    where the scale is 0 or not finite (the normaliser would be singular)."""
-    centre = np.array([math.fsum(points[:, j].tolist()) / len(points) for j in range(points.shape[1])])
-    offsets = points - centre
-    squares = offsets[:, 0] * offsets[:, 0]
-    for j in range(1, points.shape[1]):
-        squares = squares + offsets[:, j] * offsets[:, j]
-    mean = math.fsum(np.sqrt(squares).tolist()) / len(points)
-    scale = math.sqrt(2.0) / max(mean, 1e-300)
-    if not (scale > 0 and math.isfinite(scale)):  # a spread beyond the largest float: no estimate (safely)
-        raise ArithmeticError("the points' spread is not a finite positive number")
-    return centre, scale
-
-
-def _similarity(centre: np.ndarray, scale: float, inverse: bool) -> list[list[Fraction]]:
-    """The normaliser x -> scale (x - centre) (or its inverse) as an exact homogeneous matrix."""
-    d = len(centre)
-    s, c = Fraction(scale), [Fraction(float(x)) for x in centre]
-    rows = [[Fraction(0)] * (d + 1) for _ in range(d + 1)]
-    for j in range(d):
-        rows[j][j] = 1 / s if inverse else s
-        rows[j][d] = c[j] if inverse else -s * c[j]
-    rows[d][d] = Fraction(1)
-    return rows
-
-
-def _product(a: list[list[Fraction]], b: list[list[Fraction]]) -> list[list[Fraction]]:
-    return [[sum((a[i][p] * b[p][j] for p in range(len(b))), Fraction(0)) for j in range(len(b[0]))]
-            for i in range(len(a))]
-
-
-def _complement(v: np.ndarray) -> np.ndarray:
-    """An orthonormal basis (columns) of the directions orthogonal to the unit vector v: the
-    columns of the Householder reflection taking v to a coordinate axis, but that axis's."""
-    k = int(np.argmax(np.abs(v)))
-    w = v.copy()
-    w[k] = v[k] + math.copysign(1.0, v[k])
-    H = np.eye(len(v)) - (2.0 / float(mul(w, w))) * (w[:, None] * w[None, :])
-    return np.delete(H, k, axis=1)
 
 
 def information(source: np.ndarray, target: np.ndarray, M: np.ndarray) -> tuple[np.ndarray, np.ndarray, int]:
@@ -76,12 +33,8 @@ def information(source: np.ndarray, target: np.ndarray, M: np.ndarray) -> tuple[
     coordinate), and the residuals' number; analytic, in a fixed order."""
     m, n1 = M.shape
     dt = m - 1
-    (cs, ss), (ct, st) = _normaliser(source), _normaliser(target)
-    exact = _product(_product(_similarity(ct, st, False), [[Fraction(float(x)) for x in row] for row in M]),
-                     _similarity(cs, ss, True))
-    N = np.array([[float(x) for x in row] for row in exact])
-    N = N / norm(N.ravel())
-    basis = _complement(N.ravel())
+    (cs, ss), (ct, st), N = normalised_map(source, target, M)
+    basis = complement(N.ravel())
     xs = np.hstack([ss * (source - cs), np.ones((len(source), 1))])  # the normalised source points
     y = mul(xs, N.T)
     u = y[:, :dt] / y[:, dt:]
