@@ -42,8 +42,13 @@ MAX_COST_SPREAD = 1e-6  # the most a map's cost spread may move its estimate, re
 # Of a map estimate's interval width, what an end may lie from the verifier's: the width is the
 # level over the curvature J'J of far-off data (coordinates of 1e6), which another machine's
 # kernels round otherwise beyond NUMBER_SLACK (measured: 9e-6 of the width under OpenBLAS's
-# Prescott kernels on the stored far-off homography). Read on the width only, never the value.
-MAP_WIDTH_SLACK = 1e-4
+# Prescott kernels on the stored far-off homography). Today's writers read the estimate in
+# normalised coordinates (1.2e-10 of the width between kernels); documents of the writers before
+# read it in the world's, some 3e-11 of the width apart per unit of the data's offset over their
+# spread, and this slack keeps them checkable to a ratio of about 2e7 (world coordinates of 6.4e6 m
+# over a spread of 1 m) while an interval narrowed by more than a thousandth is refused. Read on
+# the width only, never the value.
+MAP_WIDTH_SLACK = 1e-3
 # Of a value's size: how far a stated interval's end may lie on the wrong side of the stated value.
 # Every writer's interval holds its value (the ends are the value less and plus distances at least
 # 0, or the least and greatest of samples the value is among, or clipped toward it), which the

@@ -83,7 +83,7 @@ import pytest
 
 from geocert.formulations.fractional.fixed_order import mul
 from geocert.verify.checks import verify_any
-from tests.verify.test_forgeries import refused_naming, rehash, stored, uncertify
+from tests.verify.test_forgeries import STORED, refused_naming, rehash, stored, uncertify
 from tests.verify.test_forgeries_review58 import resections, restated_map  # noqa: F401  (resections: the fixture)
 
 pytestmark = pytest.mark.filterwarnings("ignore")
@@ -421,12 +421,26 @@ def test_a_map_estimates_widths_do_not_move_with_the_data_far_off_the_origin(res
     moved 1e8 off the origin give widths within 1e-3 of those at the origin (measured 7.6e-5 for
     the resection and 6.8e-5 to 2.3e-4 for the homography, as the moved data round: 8e-6 of their
     spread; the writer before read them 0.4 and 0.8 of the width apart), and so does the verifier's
-    recomputation; it reads the writer's widths as its own, and refuses them a thousandth narrower
-    (the slack of before, 12 widths here, took any)."""
+    recomputation; it reads the writer's widths as its own, and refuses them 4e-3 narrower (each end
+    2e-3 of the width in, beyond estimates.MAP_WIDTH_SLACK; the slack of before, 12 widths here,
+    took any)."""
     moved = (lambda shift: _moved(resections, 1e-3, shift)) if map_kind == "resection" else (
         lambda shift: _homography_moved(1e-3, shift))
     at_origin, far = moved(0.0), moved(1e8)
     assert np.max(np.abs(_widths(far) / _widths(at_origin) - 1)) < 1e-3
     assert np.max(np.abs(_recomputed_widths(far) / _widths(at_origin) - 1)) < 1e-3
     assert _valid(far)
-    refused_naming(_narrowed(far, 1e-3), "returned", "maps/1/determinacy/intervals/")
+    refused_naming(_narrowed(far, 4e-3), "returned", "maps/1/determinacy/intervals/")
+
+
+def test_a_resection_of_the_writer_before_far_off_the_origin_still_verifies():
+    """A third party's stored resection from the writer that read the estimate in the world's
+    coordinates (tests/data/certificates/earlier/resection_far_world_frame_estimate.json: review 58's
+    cameras, the second map moved 3e7 off the origin, an offset ratio of 1.6e7, written by that
+    writer): its widths lie within estimates.MAP_WIDTH_SLACK of today's recomputation, so it
+    verifies; its intervals 4e-3 narrower are refused."""
+    earlier = json.loads((STORED / "earlier" / "resection_far_world_frame_estimate.json").read_text())
+    source = np.array(earlier["certificate"]["data"]["maps"][1]["source"])
+    assert np.abs(source).max() / np.sqrt(((source - source.mean(0)) ** 2).sum(1).mean()) > 1e7
+    assert _valid(earlier)
+    refused_naming(_narrowed(earlier, 4e-3), "returned", "maps/1/determinacy/intervals/")
