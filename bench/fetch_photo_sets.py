@@ -4,11 +4,13 @@ testing/fetch_photo_sets.py).
 
     .venv/bin/python -m bench.fetch_photo_sets [--sets templeRing,templeSparseRing,sceaux,kittiStraight,kittiTurn]
         [--root DIR] [--source middlebury=URL] [--source sceaux=GIT] [--source kitti=GIT]
+        [--source visual_hull=GIT]
 
 The root defaults to $GEOCERT_BENCH_DATA, else bench-data beside the checkout (where
 bench/reconstruction_vs_colmap.py reads, which also fetches a missing set when run with --fetch).
-A source defaults to $GEOCERT_FETCH_MIDDLEBURY, $GEOCERT_FETCH_SCEAUX or $GEOCERT_FETCH_KITTI, else
-the public address. dinoSparseRing and the Oxford Corridor are not fetched.
+A source defaults to $GEOCERT_FETCH_MIDDLEBURY, $GEOCERT_FETCH_SCEAUX, $GEOCERT_FETCH_KITTI (and the
+others testing/fetch_photo_sets.py names), else the public address; templeSparseRing comes from a
+git copy of Middlebury's files (visual_hull) where Middlebury's zip cannot be downloaded. dinoSparseRing and the Oxford Corridor are not fetched.
 """
 
 from __future__ import annotations

@@ -9,6 +9,9 @@ Sets, where they come from, and their owners (credit them when you use them):
   Diebel, Scharstein and Szeliski, "A comparison and evaluation of multi-view stereo reconstruction
   algorithms", CVPR 2006), the zip files templeRing.zip and templeSparseRing.zip of
   https://vision.middlebury.edu/mview/data/data/ (source ``middlebury``: that folder's URL).
+  Where that download fails, templeSparseRing is taken from the folder ``templeSparseRing`` of a
+  public copy on GitHub, https://github.com/maximm8/VisualHull (source ``visual_hull``: a git URL
+  or path), whose files are Middlebury's byte for byte (the same manifest checks them).
 - ``sceaux``: "Sceaux Castle", photographs copyright 2012 Pierre Moulon, openMVG's sample data set,
   the folder ``images`` of https://github.com/openMVG/ImageDataset_SceauxCastle (source
   ``sceaux``: a git URL or path). The repository states no licence beyond the copyright notice of
@@ -26,8 +29,8 @@ Sets, where they come from, and their owners (credit them when you use them):
   ``kitti``: a git URL or path).
 
 Each source is overridable: an argument (``sources``), else the environment variable
-GEOCERT_FETCH_MIDDLEBURY, GEOCERT_FETCH_SCEAUX, GEOCERT_FETCH_KITTI or GEOCERT_FETCH_DINO_CAMERAS,
-else the public address.
+GEOCERT_FETCH_MIDDLEBURY, GEOCERT_FETCH_SCEAUX, GEOCERT_FETCH_KITTI, GEOCERT_FETCH_DINO_CAMERAS or
+GEOCERT_FETCH_VISUAL_HULL, else the public address.
 Only the files the manifest names are taken (a git source's other files are not even downloaded:
 a shallow, blob-less clone checks out those paths alone), laid out as photo_sets reads them. The
 set is written in a temporary folder inside the data root and renamed into place once every file
@@ -55,16 +58,19 @@ DEFAULT_SOURCES = {
     "sceaux": "https://github.com/openMVG/ImageDataset_SceauxCastle",
     "kitti": "https://github.com/niconielsen32/VisualSLAM",
     "dino_cameras": "https://github.com/mervkilcgil/Optimization-of-3-D-Reconstruction-from-Multiple-View-Images",
+    "visual_hull": "https://github.com/maximm8/VisualHull",
 }
 ENVIRONMENT = {"middlebury": "GEOCERT_FETCH_MIDDLEBURY", "sceaux": "GEOCERT_FETCH_SCEAUX",
-               "kitti": "GEOCERT_FETCH_KITTI", "dino_cameras": "GEOCERT_FETCH_DINO_CAMERAS"}
+               "kitti": "GEOCERT_FETCH_KITTI", "dino_cameras": "GEOCERT_FETCH_DINO_CAMERAS",
+               "visual_hull": "GEOCERT_FETCH_VISUAL_HULL"}
 
 # Per set: its folder under the data root, its source, and where its files are in that source (the
-# zip file's name, or the folder of the git repository).
+# zip file's name, or the folder of the git repository); ``mirror``: a git source and folder taken
+# when the zip cannot be downloaded (its files checked against the same manifest).
 SETS = {
     "templeRing": {"folder": "middlebury_templeRing", "source": "middlebury", "zip": "templeRing.zip"},
     "templeSparseRing": {"folder": "middlebury_templeSparseRing", "source": "middlebury",
-                         "zip": "templeSparseRing.zip"},
+                         "zip": "templeSparseRing.zip", "mirror": ("visual_hull", "templeSparseRing")},
     "sceaux": {"folder": "sceaux_castle", "source": "sceaux", "subfolder": "images"},
     "kittiStraight": {"folder": "kitti_sequence_1", "source": "kitti", "subfolder": "KITTI_sequence_1"},
     "kittiTurn": {"folder": "kitti_sequence_2", "source": "kitti", "subfolder": "KITTI_sequence_2"},
@@ -74,6 +80,10 @@ SETS = {
 
 class FetchError(RuntimeError):
     pass
+
+
+class DownloadError(FetchError):
+    """The source could not be reached or read (not a file that differs from the manifest)."""
 
 
 def file_record(path: Path) -> dict:
@@ -144,7 +154,7 @@ def _from_zip(url: str, files: dict, work: Path, target: Path) -> None:
         with urllib.request.urlopen(url, timeout=120) as response, open(archive, "wb") as out:
             shutil.copyfileobj(response, out)
     except OSError as error:
-        raise FetchError(f"cannot download {url}: {error}") from error
+        raise DownloadError(f"cannot download {url}: {error}") from error
     try:
         with zipfile.ZipFile(archive) as zipped:
             members = {m.filename: m for m in zipped.infolist() if not m.is_dir()}
@@ -213,7 +223,15 @@ def fetch(key: str, root: str | os.PathLike, sources: dict | None = None, manife
         if "zip" in spec:
             url = source.rstrip("/") + "/" + spec["zip"]
             log(f"{key}: downloading {url}")
-            _from_zip(url, files, work, target)
+            try:
+                _from_zip(url, files, work, target)
+            except DownloadError as error:
+                if "mirror" not in spec:
+                    raise
+                mirror, subfolder = spec["mirror"]
+                log(f"{key}: {error}; cloning {subfolder}/ of {source_of(mirror, sources)} instead")
+                shutil.rmtree(target, ignore_errors=True)
+                _from_git(source_of(mirror, sources), subfolder, files, work, target)
         else:
             log(f"{key}: cloning {spec['subfolder']}/ of {source}")
             _from_git(source, spec["subfolder"], files, work, target)
