@@ -269,3 +269,40 @@ class TestKindOnRealCameras:
                 assert ranges["focal"][0] <= found["lower"] <= found["upper"] <= ranges["focal"][1]
             if found["name"] == "focal_y" and found["lower"] is not None:
                 assert found["lower"] > 0
+
+
+# --- what `determined` promises where the certified scope, not the data, bounds an interval ---------
+
+
+@pytest.mark.slow
+class TestDeterminedAtTheScopesEdge:
+    """A hostile user's real cameras (the Middlebury dino, f = 3310 px) solved with the default
+    intrinsics ranges, whose focal range ends at 5 x 640 = 3200 px: the metric stage's focal
+    interval is clipped to the scope, so it cannot hold the truth, yet the stage says
+    `determined`. An interval cut by the scope's edge is bounded by the scope, not fixed by the
+    data; `determined` then promises what it cannot keep."""
+
+    @pytest.mark.xfail(strict=True, reason="issue 37 attack: `determined` is true although the focal interval is "
+                       "clipped at the default scope's edge (3200 px) and misses the truth (3310 px)")
+    def test_a_focal_length_beyond_the_default_scope_is_not_determined(self):
+        views = dino_hemisphere().subset(random_views(20, 363, 2))
+        scene = scenes.from_cameras(views.cameras, views.box, 0.5, seed=0, image_size=views.image_size)
+        result = solve_job({"kind": "autocalibration", "data": scene.job_data(), "options": {"time_limit_s": 5}})
+        assert result["intrinsics"]["focal"][1] < truth(views)["focal_x"]  # the truth is beyond the scope
+        metric = result["stages"][1]["determinacy"]
+        focal = next(found for found in metric["intervals"] if found["name"] == "focal_x")
+        assert not metric["determined"] or focal["lower"] <= truth(views)["focal_x"] <= focal["upper"], focal
+
+    @pytest.mark.xfail(strict=True, reason="issue 37 attack: `determined` is true with the principal point's v at "
+                       "the scope's edge (120 px), its interval [120, 146] px, the truth 200.6 px")
+    def test_a_principal_point_at_the_scopes_edge_is_not_determined(self):
+        """20 views over the hemisphere at 1 px, the focal range widened to hold the truth: the
+        optimum's v sits on the edge of the principal point's range (the middle half of the
+        image), its interval clipped there."""
+        views = dino_hemisphere().subset(np.random.default_rng(101).choice(363, 20, replace=False))
+        scene = scenes.from_cameras(views.cameras, views.box, 1.0, seed=1, image_size=views.image_size)
+        result = solve_job({"kind": "autocalibration", "data": scene.job_data(),
+                            "options": {"time_limit_s": 5, "intrinsics": WIDE_FOCAL}})
+        metric = result["stages"][1]["determinacy"]
+        v = next(found for found in metric["intervals"] if found["name"] == "principal_v")
+        assert not metric["determined"] or v["lower"] <= truth(views)["principal_v"] <= v["upper"], v
