@@ -306,3 +306,37 @@ class TestDeterminedAtTheScopesEdge:
         metric = result["stages"][1]["determinacy"]
         v = next(found for found in metric["intervals"] if found["name"] == "principal_v")
         assert not metric["determined"] or v["lower"] <= truth(views)["principal_v"] <= v["upper"], v
+
+
+@pytest.mark.slow
+class TestFourViews:
+    """Four of the dino's views over the hemisphere (0.5 px, the focal range widened to hold
+    the truth): the modulus constraints of three view pairs against three unknowns of the plane at
+    infinity, so the affine stage fits exactly (cost ~1e-31, redundancy 0) at one of the
+    constraints' discrete solutions, not the true plane; the metric stage's K is then 30% off
+    (f = 2304 px against 3310) and neither stage warns."""
+
+    @staticmethod
+    @functools.lru_cache(maxsize=None)
+    def solved() -> tuple[datasets.CalibratedViews, dict]:
+        views = dino_hemisphere().subset(random_views(4, 363, 7))
+        scene = scenes.from_cameras(views.cameras, views.box, 0.5, seed=0, image_size=views.image_size)
+        return views, solve_job({"kind": "autocalibration", "data": scene.job_data(),
+                                 "options": {"time_limit_s": 5, "intrinsics": WIDE_FOCAL}})
+
+    @pytest.mark.xfail(strict=True, reason="issue 37 attack: an affine stage with no redundancy (an exact fit, "
+                       "cost ~1e-31) says `determined` with intervals of zero width about a wrong plane")
+    def test_a_stage_with_no_redundancy_is_not_determined(self):
+        _, result = self.solved()
+        affine = result["stages"][0]["determinacy"]
+        assert affine["redundancy"] == 0
+        assert not affine["determined"], affine
+
+    @pytest.mark.xfail(strict=True, reason="issue 37 attack: K 30% off (f = 2304 px against 3310) with no warning "
+                       "in either stage and a focal interval [2053, 2480] px that misses the truth")
+    def test_a_wrong_focal_length_is_warned_or_held_by_its_interval(self):
+        views, result = self.solved()
+        metric = result["stages"][1]["determinacy"]
+        focal = next(found for found in metric["intervals"] if found["name"] == "focal_x")
+        held = focal["lower"] is not None and focal["lower"] <= truth(views)["focal_x"] <= focal["upper"]
+        assert metric["warnings"] or held, focal
