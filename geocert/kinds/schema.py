@@ -133,7 +133,9 @@ class DeterminacyInterval(BaseModel):
 class DeterminacyWarning(BaseModel):
     code: str = Field(description="near_zero_parallax, at_infinity, near_coplanar_points, "
                                   "near_critical_configuration, near_collinear_points, pure_translation, "
-                                  "rotation_about_one_axis, orbital_motion, critical_motion, time_limit (the analysis "
+                                  "rotation_about_one_axis, orbital_motion, critical_motion, at_range_edge (an "
+                                  "interval cut by the intrinsics ranges), no_redundancy (as many residuals as "
+                                  "parameters: the noise not estimated), time_limit (the analysis "
                                   "stopped at the job's clock: not analysed), ...")
     detail: str
 

@@ -29,7 +29,18 @@ Intervals: the affine stage's plane at infinity (input frame, unit norm) over th
 modulus residuals cost at most ``cost_increase`` more; the metric stage's focal lengths, skew and
 principal point (pixels) over the omega doing so for the metric cost, combined with the range
 the plane's own family gives, clipped to the intrinsics ranges (the certified scope) and to
-positive focal lengths."""
+positive focal lengths.
+
+Two warnings say where the data, not the motion, fall short (each makes the stage not
+``determined``). ``at_range_edge`` where an interval is cut by the scope (its unclipped end
+reaches beyond an intrinsics range's end, or its value lies on one): the scope, not the data,
+bounds it, and the truth may lie beyond (a focal length beyond the default range's 5 image
+sides). A range no wider than what ``determined`` allows (the default skew's) fixes its quantity
+by itself: an end beyond it is not reported, nor a value on its end where the interval spans it.
+``no_redundancy`` where a cost has no residual beyond its parameters (the affine stage of four
+views: three modulus constraints, three unknowns, an exact fit at one of their discrete
+solutions), so that the data cannot estimate their noise and the level, 3^2 times a variance of
+0 / 0, is no level at all; the metric stage, whose plane is that fit, says so too."""
 
 from __future__ import annotations
 
@@ -485,7 +496,60 @@ def affine_stage(problem, p: np.ndarray, cost: float | None, lower: float | None
              else metric_relaxation.omega_of(family["w"]))
     named = motion_warnings(H, centres, omega=omega)
     out.warnings = _merge(_merge(out.warnings, named), _plane_warning(family, H, centres, named))
+    out.warnings += no_redundancy("the affine stage's modulus constraints", len(family["residuals"]), 3)
     return out.document()
+
+
+def no_redundancy(what: str, residuals: int, parameters: int) -> list[dict]:
+    """The warning of a cost with no residual beyond its parameters (module docstring): none
+    where it has some."""
+    if residuals > parameters:
+        return []
+    return [{"code": "no_redundancy",
+             "detail": f"{what}: {residuals} residuals for {parameters} parameters, no redundancy: the fit is exact "
+                       "whatever the noise, so the data cannot estimate their noise and the intervals' level "
+                       f"({SIGMAS:g}^2 times the residual variance) is not estimated, and the fit may be a wrong "
+                       "one of the constraints' exact solutions. More views fix it"}]
+
+
+EDGE = 1e-9  # relative: a value this close to an intrinsics range's end lies on it
+
+
+def clipped_to_scope(found: dict, lowest: float | None, highest: float | None) -> tuple[dict, str | None]:
+    """An interval clipped to its scope (core.determinacy.clip) and, where the scope cuts it, what
+    the clip hid: its value on (or beyond) a range's end (the optimum pinned there: the data pull
+    beyond it), or its end beyond a range's end. A range no wider than the interval's tolerance
+    allows (2 tolerances: the default skew's, 2% of the image side against a tenth of the focal
+    length) fixes its quantity by itself, the user's statement of it rather than a search range:
+    an end beyond it is not reported, nor a value on its end where the interval spans it all (the
+    data then do not prefer one value in it to another; the default skew pinned at its end over a
+    general motion)."""
+    value, tolerance, cut = found["value"], found.get("tolerance"), []
+    narrow = (lowest is not None and highest is not None and tolerance is not None
+              and highest - lowest <= 2.0 * tolerance)
+    clipped = clip(dict(found), lowest, highest)
+    spans = narrow and clipped["lower"] == lowest and clipped["upper"] == highest
+    for end, edge, sign in (("lower", lowest, -1.0), ("upper", highest, 1.0)):
+        if edge is None or not math.isfinite(edge):
+            continue
+        reach = found[end]
+        if value is not None and sign * (value - edge) >= -EDGE * max(abs(edge), 1.0) and not spans:
+            cut.append(f"its value {value:.6g} lies on the range's {end} end {edge:.6g}")
+        elif not narrow and reach is not None and sign * (reach - edge) > 0:
+            cut.append(f"its {end} end {reach:.6g} lies beyond the range's {edge:.6g}")
+    return clip(found, lowest, highest), (f"{found['name']} ({' and '.join(cut)})" if cut else None)
+
+
+def range_edge(cut: list[str | None]) -> list[dict]:
+    """The ``at_range_edge`` warning naming the quantities whose intervals the scope cut (none: no
+    warning)."""
+    named = [c for c in cut if c]
+    if not named:
+        return []
+    return [{"code": "at_range_edge",
+             "detail": f"the intrinsics ranges (the certified scope) cut the interval of {'; '.join(named)}: there "
+                       "the scope, not the data, bounds the quantity, and answers as good lie beyond it; widen "
+                       "the range (options.intrinsics) to learn whether the data fix it"}]
 
 
 def scope_of(problem) -> list[tuple[float | None, float | None]]:
@@ -549,9 +613,10 @@ def metric_intervals(problem, p: np.ndarray, w: np.ndarray, gap: float | None) -
     lo_p, hi_p = ranges_at(value, family["Ks"])
     lower_end = value - np.hypot(value - walk["lower"], value - lo_p)
     upper_end = value + np.hypot(walk["upper"] - value, hi_p - value)
-    intervals = [clip(interval(name, value[k], lower_end[k], upper_end[k], scales[k]), *bounds)
-                 for k, (name, bounds) in enumerate(zip(NAMES, scope_of(problem)))]
-    return {"walk": walk, "family": family, "intervals": intervals}
+    clipped = [clipped_to_scope(interval(name, value[k], lower_end[k], upper_end[k], scales[k]), *bounds)
+               for k, (name, bounds) in enumerate(zip(NAMES, scope_of(problem)))]
+    return {"walk": walk, "family": family, "intervals": [found for found, _ in clipped],
+            "cut": [cut for _, cut in clipped]}
 
 
 def metric_stage(problem, p: np.ndarray, K_pixels: np.ndarray, cost: float | None, lower: float | None,
@@ -567,6 +632,12 @@ def metric_stage(problem, p: np.ndarray, K_pixels: np.ndarray, cost: float | Non
     H = found["walk"]["setup"].H
     named = motion_warnings(H, centres, omega=metric_relaxation.omega_of(w))
     out.warnings = _merge(_merge(out.warnings, named), _plane_warning(found["family"], H, centres, named))
+    # the plane is an estimate too (its family widens K's intervals): its modulus constraints'
+    # redundancy as well as the DIAC entries'
+    out.warnings += no_redundancy("the modulus constraints that give the plane at infinity's share of these "
+                                  "intervals", len(found["family"]["residuals"]), 3)
+    out.warnings += no_redundancy("the DIAC entries", *found["walk"]["J"].shape)
+    out.warnings += range_edge(found["cut"])
     return out.document()
 
 
@@ -607,4 +678,5 @@ def varying_focal_stage(problem, p: np.ndarray, Ks: list, centres: np.ndarray | 
         clip(found, 0.0, None)
     norm = problem.norm
     out.warnings += motion_warnings(metric_relaxation.homographies(norm.cameras, norm.reference, p), centres)
+    out.warnings += no_redundancy("the per-view focal lengths' DIAC entries", len(J), len(theta))
     return out.document()
