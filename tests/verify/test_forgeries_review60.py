@@ -27,8 +27,11 @@ Found (a test below for each, which failed while the class stood):
    compared as JSON (the record's way since review 59).
 3. A certified camera's reason or bound_reason, and a certified point's reason, were any words
    ("not proven" verified). Fixed: null beside a certified camera or point, as their writers
-   state them. (test_forgeries.py's class-3 forgery, which certifies a camera its writer judged
-   uncertifiable, now clears its bound_reason, as a writer certifying it would.)
+   state them. The earlier forgeries that call an uncertified camera certified now clear its
+   bound_reason, as a writer certifying it would, so that the check each was written for is the
+   one refusing it: test_forgeries.py (_resolved_cameras, and the moved camera called certified),
+   test_forgeries_review.py (a result with its certificate's members) and
+   tests/kinds/test_reconstruction_kind.py (a camera not searched claimed certified).
 4. Each warning could be stated twice (the critical_motion warning twice verified: the checks
    ask whether a warning of a code is there). Fixed, checked last: each warning once, and no code
    twice but camera_dropped (once a camera dropped).
