@@ -4,13 +4,16 @@ Its claims are the points, each a triangulation in the cameras the certificate's
 they are checked as the triangulation kind's are (TrackItems). ``check_result`` ties the rest of
 a result to them (docs/certificate.md, "Reconstruction"):
 
-- the cameras: one per view in view order; the registered ones (the views the certificate's data
+- the cameras: one per view in view order (each view its index, compared as JSON: true and 1.0
+  are not 1); the registered ones (the views the certificate's data
   list) return the P the points are certified in, and K, R, t and the centre that P gives
   (P = K [R | t], K upper triangular with K[2][2] = 1 and a positive diagonal, R a rotation,
-  centre -R' t); the others return none of them and claim nothing;
-- each point's observations are the track the certificate's data hold for it, and the labels
-  (each camera's name and image size, each point's input track number) those the data's
-  input_labels state (a document without them: unchecked, and the report's scope says so);
+  centre -R' t); the others return none of them and claim nothing; a certified camera's reason
+  and bound_reason, and a certified point's reason, are null, and a certified point states its
+  proof's summary;
+- each point's observations are the track the certificate's data hold for it (as JSON), and
+  the labels (each camera's name and image size, each point's input track number) those the
+  data's input_labels state (a document without them: unchecked, and the report's scope says so);
 - every camera the result calls certified, or gives a lower bound, is backed by the camera
   certificate beside it: a valid resection document solved with the result's norm, max_residual,
   abs_gap and camera_rel_gap, one map per searched camera built from the returned points, in
@@ -19,7 +22,8 @@ a result to them (docs/certificate.md, "Reconstruction"):
   gap is cost - lower_bound, and its cost at most (1 + tolerance) times the proven bound plus
   abs_gap, the tolerance recomputed (camera_claim) from its points, the norm, camera_rel_gap and
   its degrees of freedom, which the K each returned camera's P fixes give (intrinsics_of);
-- the summary's counts and RMS are recomputed from the items;
+- the summary's counts and RMS are recomputed from the items (a count an integer, as everywhere
+  in the document); each warning is stated once;
 - summary.calibration is about the K returned: its K the cameras', its certified_K the one the
   calibration certificate beside it proves (a valid stratified autocalibration certificate of
   the projective reconstruction the pipeline upgraded), the difference, the range edges (the

@@ -139,7 +139,8 @@ def check_members(result: dict) -> None:
 def _check_images(result: dict, matches: dict | None, views: int) -> None:
     """``images`` (the photos' matching figures) is an object exactly when the result has a
     matches stage (photos sent: kinds.reconstruction), and that stage restates its figures (but
-    focal_prior_from_exif, added after it); it counts the views sent."""
+    focal_prior_from_exif, added after it); it counts the views sent, and its figures bound the
+    points' observations (_check_image_points)."""
     images = result.get("images")
     if images is not None and not isinstance(images, dict):
         raise Invalid("returned", f"images must be null or an object, got {type(images).__name__}")
@@ -283,9 +284,9 @@ def _check_image_points(result: dict, images: dict) -> None:
         if isinstance(pairs, list):
             inliers = sum(pair["inliers"] for pair in pairs if view in pair["views"])
             if number > inliers:
-                raise Invalid("returned", f"images/verified_pairs: the pairs of view {view} hold {inliers} inliers, and "
-                                          f"the points observe view {view} {number} times (each observation joined to "
-                                          "its track by an inlying match of its own)")
+                raise Invalid("returned", f"images/verified_pairs: the pairs of view {view} hold {inliers} inliers, "
+                                          f"and the points observe view {view} {number} times (each observation "
+                                          "joined to its track by an inlying match of its own)")
     if not isinstance(pairs, list):
         return
     parent: dict[int, int] = {}
