@@ -101,6 +101,21 @@ def same(given: Any, expected: Any) -> bool:
     return given == expected
 
 
+def same_counts(given: Any, expected: Any) -> bool:
+    """``same``, with a count (an integer expected) stated as that integer only: JSON's 12, not
+    12.0, which ``same`` takes for it (Python's 12.0 == 12). A count's writer writes an integer;
+    review 60 found 12.0 accepted as a count where one was compared with ``same`` (a
+    reconstruction's summary, its cameras' points, its stages', the job's stats) and refused where
+    a count was typed (summary/tracks, the stages' figures)."""
+    if type(expected) is int:
+        return type(given) is int and given == expected
+    if isinstance(given, dict) and isinstance(expected, dict):
+        return given.keys() == expected.keys() and all(same_counts(given[k], expected[k]) for k in given)
+    if isinstance(given, list) and isinstance(expected, list):
+        return len(given) == len(expected) and all(same_counts(a, b) for a, b in zip(given, expected))
+    return same(given, expected)
+
+
 def number(value: Any, name: str, check: str = "format") -> float:
     if not is_number(value):
         raise Invalid(check, f"{name} must be a finite JSON number, got {value!r:.40}")

@@ -26,7 +26,7 @@ from geocert.core.certificates import (BOUND_TOLERANCE, CLAIM_OPTIONS, FORMAT, O
 from geocert.core.geometry import cost_rounding, is_number, norm_cost, residual_lengths
 from geocert.verify.notes import check_notes
 from geocert.core.strict import (WORK_BASE, WORK_PER_UNIT, Invalid, document_size, nesting_depth,
-                                 informational, number as _number, printable_tree, record, same,
+                                 informational, number as _number, printable_tree, record, same, same_counts,
                                  work_budget)
 from geocert.verify import residual_claims
 from geocert.verify import estimates
@@ -910,7 +910,7 @@ def _check_stats(kind, result: dict) -> None:
         raise Invalid("returned", f"stats/statuses {stats['statuses']!r:.80} counts more than the job's "
                                   f"{len(outcomes)} item(s)")
     for name, value in expected.items():
-        if name in stats and not same(stats[name], value):
+        if name in stats and not same_counts(stats[name], value):  # counts: integers (12.0 is none)
             raise Invalid("returned", f"stats/{name} is {stats[name]!r}, the items give {value!r}")
 
 

@@ -4,13 +4,16 @@ Its claims are the points, each a triangulation in the cameras the certificate's
 they are checked as the triangulation kind's are (TrackItems). ``check_result`` ties the rest of
 a result to them (docs/certificate.md, "Reconstruction"):
 
-- the cameras: one per view in view order; the registered ones (the views the certificate's data
+- the cameras: one per view in view order (each view its index, compared as JSON: true and 1.0
+  are not 1); the registered ones (the views the certificate's data
   list) return the P the points are certified in, and K, R, t and the centre that P gives
   (P = K [R | t], K upper triangular with K[2][2] = 1 and a positive diagonal, R a rotation,
-  centre -R' t); the others return none of them and claim nothing;
-- each point's observations are the track the certificate's data hold for it, and the labels
-  (each camera's name and image size, each point's input track number) those the data's
-  input_labels state (a document without them: unchecked, and the report's scope says so);
+  centre -R' t); the others return none of them and claim nothing; a certified camera's reason
+  and bound_reason, and a certified point's reason, are null, and a certified point states its
+  proof's summary;
+- each point's observations are the track the certificate's data hold for it (as JSON), and
+  the labels (each camera's name and image size, each point's input track number) those the
+  data's input_labels state (a document without them: unchecked, and the report's scope says so);
 - every camera the result calls certified, or gives a lower bound, is backed by the camera
   certificate beside it: a valid resection document solved with the result's norm, max_residual,
   abs_gap and camera_rel_gap, one map per searched camera built from the returned points, in
@@ -19,7 +22,8 @@ a result to them (docs/certificate.md, "Reconstruction"):
   gap is cost - lower_bound, and its cost at most (1 + tolerance) times the proven bound plus
   abs_gap, the tolerance recomputed (camera_claim) from its points, the norm, camera_rel_gap and
   its degrees of freedom, which the K each returned camera's P fixes give (intrinsics_of);
-- the summary's counts and RMS are recomputed from the items;
+- the summary's counts and RMS are recomputed from the items (a count an integer, as everywhere
+  in the document); each warning is stated once;
 - summary.calibration is about the K returned: its K the cameras', its certified_K the one the
   calibration certificate beside it proves (a valid stratified autocalibration certificate of
   the projective reconstruction the pipeline upgraded), the difference, the range edges (the
@@ -45,16 +49,17 @@ the report's scope states how close they are.
 
 from __future__ import annotations
 
+import json
 import math
 from typing import Any, Callable
 
 import numpy as np
 
 from geocert.core.geometry import is_number, norm_cost
-from geocert.core.strict import Invalid, number, numbers, same
+from geocert.core.strict import Invalid, number, numbers, same, same_counts
 from geocert.verify import residual_claims
 from geocert.verify.fractional import TRACKS, TrackItems, _check_scope_words, refuse_unknown_members
-from geocert.verify.reconstruction_members import intrinsics_of
+from geocert.verify.reconstruction_members import intrinsics_of, same_json
 from geocert.verify.verification import Verification
 from geocert.formulations.fractional.options import TriangulationOptions
 from geocert.formulations.reconstruction import calibration_claim, calibration_tie, camera_claim, depth_reversal_claim, motion_claim, run_control
@@ -175,11 +180,15 @@ def _check_cameras(cameras: Any, stated: list) -> tuple[list[dict], list[int]]:
         raise Invalid("returned", "the result's cameras must be a list of objects")
     _complete(cameras, CAMERA_WRITTEN, "cameras")
     _all_or_none(cameras, CAMERA_JUDGEMENT, "cameras")
-    if [camera.get("view") for camera in cameras] != list(range(len(cameras))):
-        raise Invalid("returned", "the result's cameras must be one per view, in view order")
+    # compared as JSON: in Python true == 1 and 1.0 == 1, so a view stated as true or 1.0 (review 60)
+    # passed ==, and was read as that view by every check after
+    if not same_json([camera.get("view") for camera in cameras], list(range(len(cameras)))):
+        raise Invalid("returned", "the result's cameras must be one per view, in view order (each view its index, "
+                                  "an integer)")
     registered = _views_of(cameras)
     views = [camera["view"] for camera in registered]
-    if stated.get("cameras") != [camera["P"] for camera in registered] or stated.get("views", views) != views:
+    if stated.get("cameras") != [camera["P"] for camera in registered] or \
+            not same_json(stated.get("views", views), views):
         raise Invalid("returned", "the cameras the points are certified in are not the cameras returned")
     chosen = {id(camera) for camera in registered}
     for camera in cameras:
@@ -188,6 +197,7 @@ def _check_cameras(cameras: Any, stated: list) -> tuple[list[dict], list[int]]:
             _check_camera_fields(camera, where)
             if camera.get("registered") is not True:
                 raise Invalid("returned", f"{where}: a camera with a P is registered")
+            _check_certified_words(camera, ("reason", "bound_reason"), where, "camera")
             continue
         if any(camera.get(name) is not None for name in CAMERA_FIELDS + ("cost", "lower_bound", "gap")) or \
                 camera.get("certified") is not False or camera.get("registered") is not False or \
@@ -195,6 +205,19 @@ def _check_cameras(cameras: Any, stated: list) -> tuple[list[dict], list[int]]:
             raise Invalid("returned", f"{where}: a camera not registered returns no camera and claims nothing (status "
                                       "not_run)")
     return registered, views
+
+
+def _check_certified_words(record: dict, names: tuple, where: str, what: str) -> None:
+    """A certified camera's or point's reason words are null: its writer states why an item is not
+    registered, bounded or certified (kinds.reconstruction._camera: the registration's reason and
+    the bound's, null when certified; track_document: the track's, null when optimal), so words
+    beside a certified claim ("not proven", review 60) would say of it what its proof denies."""
+    if record.get("certified") is not True:
+        return
+    for name in names:
+        if record.get(name) is not None:
+            raise Invalid("returned", f"{where}/{name} is {record[name]!r:.60}, beside a certified {what}: its writer "
+                                      f"states {name} only of a {what} not certified (null when certified)")
 
 
 def _check_points(points: Any, tracks: Any, views: list[int]) -> None:
@@ -209,7 +232,7 @@ def _check_points(points: Any, tracks: Any, views: list[int]) -> None:
         if not isinstance(observations, list) or not all(isinstance(o, list) and len(o) == 3 for o in observations):
             raise Invalid("returned", f"points/{index}/observations must be [view, u, v] triples")
         stated = [[views[k], u, v] for k, (u, v) in zip(track["views"], track["points"])]
-        if observations != stated:
+        if not same_json(observations, stated):  # a view true or 1.0 is not view 1 (review 60)
             raise Invalid("returned", f"points/{index}/observations are not the track its certificate is about")
 
 
@@ -289,10 +312,11 @@ def _check_summary(result: dict, registered: list[dict]) -> None:
                 "cameras_certified_fraction": certified_cameras / len(registered) if registered else None}
     for name, value in expected.items():
         given = summary.get(name)
-        # a count is the items' number itself (4.0 is 4, as JavaScript writes it; 4.000000001 is
-        # no count); only a fraction, a quotient, may differ from the recomputed one by its rounding
+        # a count is the items' number itself, an integer (same_counts: 12.0 is none); only a
+        # fraction, a quotient, may differ from the recomputed one by its rounding
         fraction = name.endswith("_fraction")
-        if not (same(given, value) or (fraction and value is not None and _close(given, value, 0.0))):
+        if not (same_counts(given, value) if not fraction else
+                same(given, value) or (value is not None and _close(given, value, 0.0))):
             raise Invalid("returned", f"summary/{name} is {given!r}, the items give {value!r}"
                                       + ("" if fraction else " (a count: exactly that number)"))
     rms = math.sqrt(squared / count) if count else None
@@ -306,8 +330,9 @@ def _check_summary(result: dict, registered: list[dict]) -> None:
                   "cameras": {"cameras": len(registered), "certified": certified_cameras,
                               "searched": sum(1 for c in cameras if c.get("searched") is True)}}.get(stage.get("name"))
         for name, value in (counts or {}).items():
-            if name in stage and not same(stage[name], value):
-                raise Invalid("returned", f"stages/{stage['name']}/{name} is {stage[name]!r}, the items give {value!r}")
+            if name in stage and not same_counts(stage[name], value):
+                raise Invalid("returned", f"stages/{stage['name']}/{name} is {stage[name]!r}, the items give {value!r} "
+                                          "(a count: that integer)")
 
 
 def _check_pipeline_counts(result: dict, rel_gap: float, states_depth_reversal: bool) -> None:
@@ -325,7 +350,7 @@ def _check_pipeline_counts(result: dict, rel_gap: float, states_depth_reversal: 
         given = summary.get(name)
         if not (isinstance(given, int) and not isinstance(given, bool) and given >= 0):
             raise Invalid("returned", f"summary/{name} must be a count, got {given!r}")
-        if name in structure and not same(structure[name], given):
+        if name in structure and not same_counts(structure[name], given):
             raise Invalid("returned", f"summary/{name} is {given!r}, the structure stage's {structure[name]!r}")
     numbers_ = [point.get("track") for point in points]
     if not all(isinstance(t, int) and not isinstance(t, bool) and 0 <= t < summary["tracks"] for t in numbers_) \
@@ -338,7 +363,7 @@ def _check_pipeline_counts(result: dict, rel_gap: float, states_depth_reversal: 
         raise Invalid("returned", f"summary/points_dropped {summary['points_dropped']!r}: its warning must say it")
     dropped = sum(1 for c in cameras if c.get("registered") is False and str(c.get("reason") or "").startswith("dropped"))
     warned = sum(1 for w in summary.get("warnings") or [] if isinstance(w, dict) and w.get("code") == "camera_dropped")
-    if not summary.get("cameras_dropped") == dropped == warned:
+    if not (same_counts(summary.get("cameras_dropped"), dropped) and dropped == warned):
         raise Invalid("returned", f"summary/cameras_dropped is {summary.get('cameras_dropped')!r}: {dropped} views are "
                                   f"dropped by their reason, {warned} by the warnings")
     # claims._doubts, recomputed: the cameras bounded, the counts above. A result from before the
@@ -532,6 +557,29 @@ def _check_known_K_distortion(radial: dict, k1: float, focal: float, K: np.ndarr
 def _warned(summary: dict, code: str) -> bool:
     warnings = summary.get("warnings")
     return isinstance(warnings, list) and any(isinstance(w, dict) and w.get("code") == code for w in warnings)
+
+
+# The one warning its writer states once an item: camera_dropped, once for each camera dropped
+# (claims.summarise); every other code once at most.
+WARNED_EACH = ("camera_dropped",)
+
+
+def _check_warnings_once(summary: dict) -> None:
+    """Each warning is stated once: no warning twice (the same code and detail), and no code but
+    camera_dropped (one a camera dropped, each naming its view) twice. The checks that read a
+    warning ask whether one of its code is there, so a second copy of it (review 60: the
+    critical_motion warning twice verified), or a second one of its code saying something else,
+    would be read by none of them."""
+    warnings = [w for w in summary.get("warnings") or [] if isinstance(w, dict)]
+    seen: set[str] = set()
+    codes: set = set()
+    for warning in warnings:
+        code, written = warning.get("code"), json.dumps(warning, sort_keys=True)
+        if written in seen or (code in codes and code not in WARNED_EACH):
+            raise Invalid("returned", f"summary/warnings states the {code!r:.40} warning twice: its writer states "
+                                      "each warning once (camera_dropped once for each camera dropped)")
+        seen.add(written)
+        codes.add(code)
 
 
 def _check_calibration(result: dict, registered: list[dict], verify: Callable[[dict], object],
@@ -1037,7 +1085,7 @@ def _check_camera_figures(result: dict, registered: list[dict], rel_gap: float, 
     unchecked: list[int] = []
     dof = camera_claim.degrees_of_freedom([intrinsics_of(camera["P"]) for camera in registered])
     stage = next((s for s in result.get("stages") or [] if isinstance(s, dict) and s.get("name") == "cameras"), None)
-    if stage is not None and "degrees_of_freedom" in stage and stage["degrees_of_freedom"] != dof:
+    if stage is not None and "degrees_of_freedom" in stage and not same_counts(stage["degrees_of_freedom"], dof):
         raise Invalid("returned", f"stages/cameras/degrees_of_freedom is {stage['degrees_of_freedom']!r:.40}, the "
                                   f"K the returned cameras' P fix give {dof}")
     for camera, entry in zip(registered, maps):
@@ -1053,14 +1101,15 @@ def _check_camera_figures(result: dict, registered: list[dict], rel_gap: float, 
         if status == "not_run":
             if any(camera.get(name) is not None for name in ("cost", "lower_bound", "gap", "optimal_cost",
                                                               "degrees_of_freedom", "tolerance")) \
-                    or camera.get("searched", False) is not False or camera.get("points") not in (0, None):
+                    or camera.get("searched", False) is not False \
+                    or not (camera.get("points") is None or same_counts(camera["points"], 0)):
                 raise Invalid("returned", f"{where}: a camera not judged (not_run) states no figures")
             continue
         source = np.asarray(entry["source"], dtype=float).reshape(-1, 3)
         target = np.asarray(entry["target"], dtype=float).reshape(-1, 2)
         # every judged camera states its certified points' number, as its writer does (null read as
         # "no count" let a forger leave it unstated: review 41)
-        if not same(camera.get("points"), len(source)):
+        if not same_counts(camera.get("points"), len(source)):
             raise Invalid("returned", f"{where}: points {camera['points']!r}, its certified points number "
                                       f"{len(source)}")
         if status == "degenerate" and not len(source) < camera_claim.MIN_POINTS:
@@ -1091,7 +1140,7 @@ def _check_camera_figures(result: dict, registered: list[dict], rel_gap: float, 
         stated = camera.get("degrees_of_freedom")
         if stated is None and camera.get("tolerance") is None:
             continue  # a result from before they were stated: held to a 3x4 camera's (no allowance)
-        if not same(stated, dof):
+        if not same_counts(stated, dof):
             raise Invalid("returned", f"{where}: degrees_of_freedom {stated!r}, the K the returned cameras' P fix give {dof}")
         given = camera.get("tolerance")
         if not (given is None and tolerance is None) and not (tolerance is not None and _close(given, tolerance, 0.0)):
@@ -1201,7 +1250,8 @@ def _check_unstarted(result: dict, registered: list[dict], seen: list[int]) -> N
     unstarted = [c for c in judged if c.get("status") in CAMERA_STOPS and c.get("searched", True) is not True]
     if not unstarted:
         return
-    if stage is not None and "cameras_not_started" in stage and not same(stage["cameras_not_started"], len(unstarted)):
+    if stage is not None and "cameras_not_started" in stage \
+            and not same_counts(stage["cameras_not_started"], len(unstarted)):
         raise Invalid("returned", f"cameras/{unstarted[0]['view']}: called never started, with "
                                   f"{len(unstarted)} cameras so, but the cameras stage counts "
                                   f"{stage['cameras_not_started']!r:.20} not started")
@@ -1265,6 +1315,18 @@ class ReconstructionItems(TrackItems, Verification):
             if isinstance(point, dict) and point.get("determinacy") is not None:
                 raise Invalid("returned", f"points/{index}/determinacy is stated, and a reconstruction's writer states "
                                           "none for a point (null: no analysis of it is run)")
+        for index, point in enumerate(points):
+            if not (isinstance(point, dict) and point.get("certified") is True):
+                continue
+            _check_certified_words(point, ("reason",), f"points/{index}", "point")
+            # a reconstruction takes no options.detail (its points' summaries are always written:
+            # track_document, certificate_summary states one for every certified item), so a
+            # certified point stating none (null, review 60) claims an optimum without saying what
+            # its proof covers
+            if not isinstance(point.get("certificate"), dict):
+                raise Invalid("returned", f"points/{index}/certificate is {point.get('certificate')!r:.40}, beside a "
+                                          "certified point: its writer states the summary of its proof (scope, "
+                                          "tolerance, root region, leaves) for every certified point")
         for index, (point, claim) in enumerate(zip(points, certificate["items"])):
             summary = point.get("certificate") if isinstance(point, dict) else None
             self._check_root_region(f"points/{index}", summary, claim, certificate, index)
@@ -1433,6 +1495,7 @@ class ReconstructionItems(TrackItems, Verification):
             scoped["calibration_tie"] = calibration_tie.tie(result, _stage(result, "autocalibration"),
                                                             calibration.get("data") or {},
                                                             recorded)
+        _check_warnings_once(result["summary"])  # last: a check reading one warning names its own
         return scoped
 
 

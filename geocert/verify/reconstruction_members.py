@@ -139,7 +139,8 @@ def check_members(result: dict) -> None:
 def _check_images(result: dict, matches: dict | None, views: int) -> None:
     """``images`` (the photos' matching figures) is an object exactly when the result has a
     matches stage (photos sent: kinds.reconstruction), and that stage restates its figures (but
-    focal_prior_from_exif, added after it); it counts the views sent."""
+    focal_prior_from_exif, added after it); it counts the views sent, and its figures bound the
+    points' observations (_check_image_points)."""
     images = result.get("images")
     if images is not None and not isinstance(images, dict):
         raise Invalid("returned", f"images must be null or an object, got {type(images).__name__}")
@@ -151,7 +152,7 @@ def _check_images(result: dict, matches: dict | None, views: int) -> None:
     for name, value in images.items():
         # the same JSON (review 59: 1268.0 or a pair's views [0.0, 1.0] compared equal to the stage's
         # counts, typed there only, and an index of a float stopped the check with a TypeError)
-        if name != "focal_prior_from_exif" and name in matches and not _same(matches[name], value):
+        if name != "focal_prior_from_exif" and name in matches and not same_json(matches[name], value):
             raise Invalid("returned", f"images/{name} is not the matches stage's {name}")
         if name == "focal_prior_from_exif" or name in matches:
             continue
@@ -164,6 +165,7 @@ def _check_images(result: dict, matches: dict | None, views: int) -> None:
     if counted is not None and (not isinstance(counted, list) or len(counted) != views):
         raise Invalid("returned", f"images/features_per_image must count each of the {views} images")
     _check_image_counts(result, images, matches)
+    _check_image_points(result, images)
 
 
 # The images record's counts its writer states wherever matching ran (features.tracks_from_images).
@@ -171,7 +173,7 @@ COUNTED = ("images", "features_per_image", "candidate_pairs", "verified_pairs", 
            "dropped_inconsistent", "dropped_short", "tracks_kept")
 
 
-def _same(one: Any, other: Any) -> bool:
+def same_json(one: Any, other: Any) -> bool:
     """One JSON value and another written alike (a count and its float, true and 1, differ)."""
     return json.dumps(one, sort_keys=True) == json.dumps(other, sort_keys=True)
 
@@ -254,6 +256,56 @@ def _check_pair_figures(images: dict, pairs: list) -> None:
     if built is not None and built > sum(pair["inliers"] for pair in pairs):
         raise Invalid("returned", f"images/tracks_built is {built!r:.20}, more than the verified pairs' inliers "
                                   f"({sum(pair['inliers'] for pair in pairs)}): each track holds one at least")
+
+
+def _check_image_points(result: dict, images: dict) -> None:
+    """The points' observations against the images record they were matched from (features.
+    tracks_from_images: a track is a connected group of the verified pairs' inlying matches,
+    build_tracks, holding one feature of each of its images): in each view, the points observe at
+    most that image's features (features_per_image; each observation is a feature of one track)
+    and at most the inliers of that image's verified pairs (each such feature is joined to its
+    track by an inlying match of its own), and each point's views lie in one connected component of
+    the verified pairs (a track joins no images that no chain of verified pairs joins). Review 60:
+    a record stating 10 features, or 5 inliers in each pair, of an image the points observe 443
+    times, and a record whose pairs split the images in two beside tracks joining both halves,
+    verified. Read where the record states the figures (typed by _check_image_counts), the
+    observations' views the cameras' (_check_points)."""
+    counted, pairs = images.get("features_per_image"), images.get("verified_pairs")
+    points = [point for point in result.get("points") or [] if isinstance(point, dict)]
+    observed: dict[int, int] = {}
+    for point in points:
+        for view, _, _ in point.get("observations") or []:
+            observed[view] = observed.get(view, 0) + 1
+    for view, number in sorted(observed.items()):
+        if isinstance(counted, list) and view < len(counted) and type(counted[view]) is int \
+                and number > counted[view]:
+            raise Invalid("returned", f"images/features_per_image/{view} is {counted[view]}, and the points observe "
+                                      f"view {view} {number} times (each observation one feature of its image)")
+        if isinstance(pairs, list):
+            inliers = sum(pair["inliers"] for pair in pairs if view in pair["views"])
+            if number > inliers:
+                raise Invalid("returned", f"images/verified_pairs: the pairs of view {view} hold {inliers} inliers, "
+                                          f"and the points observe view {view} {number} times (each observation "
+                                          "joined to its track by an inlying match of its own)")
+    if not isinstance(pairs, list):
+        return
+    parent: dict[int, int] = {}
+
+    def root(view: int) -> int:
+        while parent.get(view, view) != view:
+            view = parent[view]
+        return view
+
+    for pair in pairs:
+        first, second = (root(view) for view in pair["views"])
+        if first != second:
+            parent[max(first, second)] = min(first, second)
+    for index, point in enumerate(points):
+        joined = {root(view) for view, _, _ in point.get("observations") or []}
+        if len(joined) > 1:
+            raise Invalid("returned", f"images/verified_pairs: points/{index} observes views "
+                                      f"{sorted(view for view, _, _ in point['observations'])} that no chain of "
+                                      "verified pairs joins (a track is a connected group of the pairs' matches)")
 
 
 def _check_ties(result: dict, stages: dict, views: int, tracks: int) -> None:

@@ -261,7 +261,7 @@ def _resolved_cameras(result: dict, document: dict) -> None:
     searched = [camera for camera in result["cameras"] if camera.get("searched")]
     for camera, claim in zip(searched, document["items"]):
         camera.update(certified=True, status="optimal", lower_bound=claim["lower_bound"],
-                      gap=camera["cost"] - claim["lower_bound"], optimal_cost=claim["cost"])
+                      gap=camera["cost"] - claim["lower_bound"], optimal_cost=claim["cost"], bound_reason=None)
     result["camera_certificate"] = document
     count = sum(camera["certified"] for camera in result["cameras"])
     result["summary"].update(cameras_certified=count, cameras_certified_fraction=count / len(searched))
@@ -1013,7 +1013,7 @@ class TestCameraToleranceFromOptions:
         camera = forged["cameras"][4]
         assert not camera["certified"] and camera["cost"] > 100 * camera["lower_bound"]
         assert verify_any(forged).valid  # the moved camera, honestly uncertified
-        camera.update(certified=True, status="optimal")
+        camera.update(certified=True, status="optimal", bound_reason=None)  # (its words cleared: review 60)
         count = sum(c["certified"] for c in forged["cameras"])
         forged["summary"].update(cameras_certified=count, cameras_certified_fraction=count / len(forged["cameras"]))
         _cameras_stage(forged)["certified"] = count

@@ -390,7 +390,7 @@ class TestResultReadAsItsCertificate:
     def test_a_reconstruction_result_with_its_certificates_members_is_refused(self, calibrated_reconstruction):
         result = self.merged(copy.deepcopy(calibrated_reconstruction))
         camera = next(c for c in result["cameras"] if c["registered"] and not c["certified"])
-        camera.update(certified=True, status="optimal")
+        camera.update(certified=True, status="optimal", bound_reason=None)
         result["summary"].update(cameras_certified=6, cameras_certified_fraction=1.0, rms_reprojection_px=0.01)
         assert refused(result)["check"] in ("format", "returned")
 
