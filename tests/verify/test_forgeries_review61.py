@@ -179,3 +179,30 @@ def test_a_tracks_proof_swapped_with_anothers_is_refused():
     forged = copy.deepcopy(genuine)
     forged["certificate"]["items"][0]["proof"] = copy.deepcopy(genuine["certificate"]["items"][1]["proof"])
     assert not _valid(forged)
+
+
+# Held: a dual vector rescaled, negated or flushed toward the smallest normal proves nothing
+
+SMALLEST_NORMAL = 2.2250738585072014e-308
+RESCALED = {
+    "times 2^-1000": lambda z: np.ldexp(z, -1000),
+    "times 2^600": lambda z: np.ldexp(z, 600),
+    "negated": lambda z: -z,
+    "every nonzero entry the smallest normal": lambda z: np.where(z != 0, np.sign(z) * SMALLEST_NORMAL, 0.0),
+}
+
+
+@pytest.mark.parametrize("name,path", [("autocalibration_direct", ("programs", 0, "z")),
+                                       ("bilinear_l2l2", ("tightening", 0, "duals", 0))])
+@pytest.mark.parametrize("edit", sorted(RESCALED))
+def test_a_dual_vector_rescaled_is_refused(name, path, edit):
+    from geocert.core.certificates import unpack
+    from tests.verify.test_forgeries import raw_pack
+
+    genuine = stored(name)
+    forged = copy.deepcopy(genuine)
+    holder = forged["certificate"]["items"][0]["proof"]
+    for key in path[:-1]:
+        holder = holder[key]
+    holder[path[-1]] = raw_pack(RESCALED[edit](unpack(holder[path[-1]])))
+    assert not _valid(forged)
