@@ -28,7 +28,7 @@ verify_any run):
   vector (base64) scaled by 1e300, 1e-300 or 2^-1000, negated, every nonzero entry set to the
   smallest normal, or times 1 + 1e-3 (2,806 forgeries in the first run, 4,436 in the second).
   Accepted only: a recorded bound lowered (informational, at most what the vector proves), a cap
-  raised, a proof's box edited where no leaf names it, 0 and -0.0 exchanged in a box, a dual
+  raised, a proof's box edited where its leaves still lie inside it, 0 and -0.0 exchanged, a dual
   vector times 1 + 1e-3 where the bound it still proves suffices (any vector's safe bound is a
   bound), and edits of proofs whose claim is the trivial 0 (the stored stratified affine stage:
   its leaves' corners widened to 1e308, its regions' frame, rows and unit edited; the direct
