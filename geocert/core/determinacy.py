@@ -233,7 +233,11 @@ def information_intervals(information: np.ndarray, cost: float, redundancy: int,
         if free > 1e-6 * max(np.abs(g).max(), 1e-300) or not math.isfinite(value):
             out.intervals.append(interval(name, value, None, None, *scale))
             continue
-        half = math.sqrt(delta * float(np.sum(g[fixed] ** 2 / values[fixed])))
+        # g scaled by its largest entry before it is squared: a quantity in tiny units (a centre in
+        # a world unit of 1e-300) has a gradient whose square underflows to 0, which gave a width
+        # of 0 beside determined true (review 61 class 2); a huge one's overflowed
+        size = float(np.abs(g[fixed]).max(initial=0.0))
+        half = size * math.sqrt(delta * float(np.sum((g[fixed] / size) ** 2 / values[fixed]))) if size > 0 else 0.0
         out.intervals.append(interval(name, value, value - half, value + half, *scale))
     return out
 

@@ -50,7 +50,7 @@ verify_any run):
   the hashes made again: 236 forgeries): accepted only where the options swapped were equal but
   for job_time_limit_s (no claim moves).
 
-Found (a test below for each, marked xfail while the class stands):
+Found (a test below for each, failing on the code before its fix):
 
 1. A resection's determinacy ends are compared with the verifier's as absolute numbers, with the
    value's floor (estimates._map_value_floor: 8 eps of the source's largest coordinate) and
@@ -64,7 +64,8 @@ Found (a test below for each, marked xfail while the class stands):
    (UTM-like coordinates, exact fit: widths 1.5e-8 beside a floor of 8.9e-9). At fault:
    verify.estimates._check_maps (the resection's _compare call without offsets); the writer
    states each end as value -+ a half-width it computes in normalised coordinates, so the ends'
-   offsets from the value are the quantities to compare.
+   offsets from the value are the quantities to compare. Fixed so: each end is read as its
+   offset from the value (to the width's slack and END_OFFSET_ULPS of the end), as a track's.
 2. A resection's centre in a tiny world unit gets zero-width intervals: the writer's estimate
    (fractional.determinacy.map_ -> core.determinacy.information_intervals) squares the centre's
    gradient in the world's units, which underflows below about 1e-154: review 58's second map with
@@ -76,6 +77,13 @@ Found (a test below for each, marked xfail while the class stands):
    triangulation tracks at the same scales fail safe (unbounded, not determined). (The service
    itself, solving such a job, states inf residuals at x1e-162 and no matrix at x1e-300, so the
    document is made by hand: the true camera in those units, its cost and estimate its writers'.)
+   Fixed at the causes: a gradient is scaled by its largest entry before it is squared
+   (core.determinacy.information_intervals, for every estimate); the centre's distance, the
+   tolerance's scale, is math.hypot's; and the normaliser reads a spread below 1e-150 at a
+   power of two (fractional.normalisation: a spread of 1e-180 had read as 0, putting
+   the centre at the centroid with widths of 0 beside determined true, from 1e-180 to 1e-280).
+   The widths now scale with the unit from 1 to 1e-300 (a test below); at 1e-305 the centre is
+   left unbounded.
 
 Held: every dual vector edit, every proof number edit that would change a claim, the item summaries
 and embedded certificates swapped, the homographies far off (narrowing beyond 2e-3 refused, the far
@@ -130,13 +138,12 @@ def _intervals(document: dict) -> list:
 
 # 1. A resection's ends are read as absolute numbers, each with the value's floor
 
-@pytest.mark.xfail(strict=True, reason="review 61 class 1, not fixed: a resection's interval ends are compared "
-                                       "with the value's floor, not as offsets from the value")
 def test_a_resection_fitting_exactly_far_off_narrowed_is_refused(resections):
     """Review 58's second camera 1e8 off the origin, its targets the exact projections: the
     centre's intervals are 4e-7 to 1.5e-6 wide beside a value floor of 1.8e-7 (8 eps of 1e8), and
     centre_x and centre_y collapsed to a thousandth of their width, centre_z 20% narrower, verified
-    (determined true)."""
+    (determined true). Fixed: a resection's ends are read as offsets from its value
+    (estimates._check_maps)."""
     genuine = _exact_far(resections, 1e8)
     assert _valid(genuine)
     assert genuine["maps"][1]["determinacy"]["determined"] is True
@@ -149,8 +156,6 @@ def test_a_resection_fitting_exactly_far_off_narrowed_is_refused(resections):
 
 # 2. A centre in a tiny world unit: its gradient's square underflows, the intervals collapse
 
-@pytest.mark.xfail(strict=True, reason="review 61 class 2, not fixed: a resection's centre intervals in a tiny "
-                                       "world unit collapse to 0 width (the gradient's square underflows)")
 def test_a_resection_centre_in_a_tiny_world_unit_stated_exact_is_refused(resections):
     """Review 58's second map with its source x1e-300 (normal floats, 1 px of noise, the centre
     interval 0.57e-300 wide at the same data in metres, scaled): every centre interval stated as
@@ -165,12 +170,17 @@ def test_a_resection_centre_in_a_tiny_world_unit_stated_exact_is_refused(resecti
     refused_naming(forged, "returned", "maps/1/determinacy/")
 
 
-def test_a_resection_centre_in_a_tiny_world_unit_is_scaled_or_unbounded(resections):
+@pytest.mark.parametrize("unit", [1e-150, 1e-180, 1e-250, 1e-300])
+def test_a_resection_centre_in_a_tiny_world_unit_is_scaled(resections, unit):
     """What the class above reads against: the same data in metres (x1) state widths that, scaled
-    by 1e-150, are the ones the writer states at x1e-150 (to 1e-6), where nothing underflows."""
-    at_metres, small = _current(_rescaled(resections, 1.0, 1.0)), _current(_rescaled(resections, 1e-150, 1.0))
+    by the unit, are the ones the writer states in that unit (to 1e-6), the tolerance alike, and
+    the document verifies."""
+    at_metres, small = _current(_rescaled(resections, 1.0, 1.0)), _current(_rescaled(resections, unit, 1.0))
     widths = [np.array([f["upper"] - f["lower"] for f in _intervals(d)]) for d in (at_metres, small)]
-    assert np.allclose(widths[1] / 1e-150, widths[0], rtol=1e-6)
+    assert np.all(widths[0] > 0)
+    assert np.allclose(widths[1] / unit, widths[0], rtol=1e-6)
+    tolerances = [np.array([f["tolerance"] for f in _intervals(d)]) for d in (at_metres, small)]
+    assert np.allclose(tolerances[1] / unit, tolerances[0], rtol=1e-6)
     assert _valid(small)
 
 

@@ -422,7 +422,9 @@ def map_(source: np.ndarray, target: np.ndarray, matrix: list[list[float]] | Non
     local = offset(zero)
     value = cs + local
     gradient = numeric_jacobian(offset, zero)
-    distance = float(np.linalg.norm(local))  # the centre known to a tenth of it
+    # the centre known to a tenth of it; math.hypot scales as it sums, where norm's squares
+    # underflow for a centre in a tiny world unit (1e-300) and gave a tolerance of 0
+    distance = math.hypot(*map(float, local))
     for k, name in enumerate(("centre_x", "centre_y", "centre_z")):
         quantities[name] = (float(value[k]), gradient[k], distance)
     out = curvature_intervals(J, residuals(zero), quantities, certified_gap(cost, lower),

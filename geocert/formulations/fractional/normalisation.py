@@ -27,10 +27,17 @@ def normaliser(points: np.ndarray) -> tuple[np.ndarray, float]:
     where the scale is 0 or not finite (the normaliser would be singular)."""
     centre = np.array([math.fsum(points[:, j].tolist()) / len(points) for j in range(points.shape[1])])
     offsets = points - centre
+    # Squares of offsets below 1e-150 underflow: there the offsets are read at a power of two
+    # bringing the largest near 1, exactly, and the mean scaled back; a spread of 1e-180 read as 0
+    # gave the scale of 1e-300 and a centre at the centroid (review 61). (Above 1e150 the squares
+    # overflow, the scale is 0 and no estimate is made, as the data's exact cost overflows too.)
+    largest = float(np.max(np.abs(offsets))) if offsets.size else 0.0
+    shift = -math.frexp(largest)[1] if 0.0 < largest < 1e-150 else 0
+    offsets = np.ldexp(offsets, shift)
     squares = offsets[:, 0] * offsets[:, 0]
     for j in range(1, points.shape[1]):
         squares = squares + offsets[:, j] * offsets[:, j]
-    mean = math.fsum(np.sqrt(squares).tolist()) / len(points)
+    mean = math.ldexp(math.fsum(np.sqrt(squares).tolist()) / len(points), -shift)
     scale = math.sqrt(2.0) / max(mean, 1e-300)
     if not (scale > 0 and math.isfinite(scale)):  # a spread beyond the largest float: no estimate (safely)
         raise ArithmeticError("the points' spread is not a finite positive number")
