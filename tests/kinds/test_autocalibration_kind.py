@@ -149,6 +149,20 @@ class TestBadInput:
         with pytest.raises(ValidationError):
             KIND.request_model.model_validate(document)
 
+    def test_cameras_with_unoriented_signs_are_told_to_orient_first(self):
+        """Cameras alone, three of them negated (a DLT's sign is arbitrary): no plane at infinity
+        is consistent with chirality, proved exactly, and the reason says what to do about it
+        (issue 37's attack: it named chirality only)."""
+        scene = scenes.make_scene(8, 0.0, points=50, seed=3)
+        cameras = np.array(scene.cameras)
+        cameras[[0, 3, 5]] *= -1
+        result = solve_job({"kind": "autocalibration", "options": {"time_limit_s": 20},
+                            "data": {**scene.job_data(with_points=False), "cameras": cameras.tolist()}})
+        affine = result["stages"][0]
+        assert result["status"] == "failed" and affine["status"] == "failed"
+        assert "consistent with chirality" in affine["reason"] and "/v1/orient" in affine["reason"]
+        assert "/v1/orient" in result["reason"]
+
 
 class TestProgressAndCancel:
     def test_progress_names_each_stage(self):

@@ -134,7 +134,9 @@ def regions_of(norm: frames.Normalised, coef: np.ndarray) -> tuple[list[Region],
         setup = affine_relaxation.AffineSetup(coef, frames.plane_map(G, delta), a[used], b[used])
         regions.append(Region(delta, G, used, lo, hi, [side[1] for side in sides], setup))
     if not regions:
-        return [], excluded, "no plane at infinity is consistent with chirality (no quasi-affine frame)"
+        return [], excluded, ("no plane at infinity is consistent with chirality (no quasi-affine frame); the cameras' "
+                                "signs may not be oriented: orient the reconstruction with its points first "
+                                "(POST /v1/orient, docs/kinds.md, \"Camera signs\")")
     return regions, excluded, None
 
 

@@ -301,7 +301,9 @@ def solve_direct(setup: direct.DirectSetup, options, record: bool, check=None) -
     start = time.perf_counter()
     if not setup.orientations:
         return DirectStage("failed", False, None, math.inf, -math.inf, options.relaxation_order,
-                           reason="no plane at infinity is consistent with chirality (both orientations excluded)",
+                           reason=("no plane at infinity is consistent with chirality (both orientations excluded); the "
+                                   "cameras' signs may not be oriented: orient the reconstruction with its points "
+                                   "first (POST /v1/orient, docs/kinds.md, \"Camera signs\")"),
                            elapsed_s=time.perf_counter() - start)
     stage = _solve_order(setup, options, options.relaxation_order, record, check)
     stage.elapsed_s = time.perf_counter() - start
