@@ -59,7 +59,7 @@ from geocert.core.geometry import is_number, norm_cost
 from geocert.core.strict import Invalid, number, numbers, same, same_counts
 from geocert.verify import residual_claims
 from geocert.verify.fractional import TRACKS, TrackItems, _check_scope_words, refuse_unknown_members
-from geocert.verify.reconstruction_members import intrinsics_of, same_json
+from geocert.verify.reconstruction_members import intrinsics_of
 from geocert.verify.verification import Verification
 from geocert.formulations.fractional.options import TriangulationOptions
 from geocert.formulations.reconstruction import calibration_claim, calibration_tie, camera_claim, depth_reversal_claim, motion_claim, run_control
@@ -180,15 +180,15 @@ def _check_cameras(cameras: Any, stated: list) -> tuple[list[dict], list[int]]:
         raise Invalid("returned", "the result's cameras must be a list of objects")
     _complete(cameras, CAMERA_WRITTEN, "cameras")
     _all_or_none(cameras, CAMERA_JUDGEMENT, "cameras")
-    # compared as JSON: in Python true == 1 and 1.0 == 1, so a view stated as true or 1.0 (review 60)
-    # passed ==, and was read as that view by every check after
-    if not same_json([camera.get("view") for camera in cameras], list(range(len(cameras)))):
+    # a view is an integer (same_counts): in Python true == 1 and 1.0 == 1, so a view stated as true
+    # or 1.0 (review 60) passed ==, and was read as that view by every check after
+    if not same_counts([camera.get("view") for camera in cameras], list(range(len(cameras)))):
         raise Invalid("returned", "the result's cameras must be one per view, in view order (each view its index, "
                                   "an integer)")
     registered = _views_of(cameras)
     views = [camera["view"] for camera in registered]
     if stated.get("cameras") != [camera["P"] for camera in registered] or \
-            not same_json(stated.get("views", views), views):
+            not same_counts(stated.get("views", views), views):
         raise Invalid("returned", "the cameras the points are certified in are not the cameras returned")
     chosen = {id(camera) for camera in registered}
     for camera in cameras:
@@ -232,7 +232,7 @@ def _check_points(points: Any, tracks: Any, views: list[int]) -> None:
         if not isinstance(observations, list) or not all(isinstance(o, list) and len(o) == 3 for o in observations):
             raise Invalid("returned", f"points/{index}/observations must be [view, u, v] triples")
         stated = [[views[k], u, v] for k, (u, v) in zip(track["views"], track["points"])]
-        if not same_json(observations, stated):  # a view true or 1.0 is not view 1 (review 60)
+        if not same_counts(observations, stated):  # a view true or 1.0 is not view 1 (review 60)
             raise Invalid("returned", f"points/{index}/observations are not the track its certificate is about")
 
 

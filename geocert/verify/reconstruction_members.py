@@ -152,7 +152,7 @@ def _check_images(result: dict, matches: dict | None, views: int) -> None:
     for name, value in images.items():
         # the same JSON (review 59: 1268.0 or a pair's views [0.0, 1.0] compared equal to the stage's
         # counts, typed there only, and an index of a float stopped the check with a TypeError)
-        if name != "focal_prior_from_exif" and name in matches and not same_json(matches[name], value):
+        if name != "focal_prior_from_exif" and name in matches and not _same(matches[name], value):
             raise Invalid("returned", f"images/{name} is not the matches stage's {name}")
         if name == "focal_prior_from_exif" or name in matches:
             continue
@@ -173,7 +173,7 @@ COUNTED = ("images", "features_per_image", "candidate_pairs", "verified_pairs", 
            "dropped_inconsistent", "dropped_short", "tracks_kept")
 
 
-def same_json(one: Any, other: Any) -> bool:
+def _same(one: Any, other: Any) -> bool:
     """One JSON value and another written alike (a count and its float, true and 1, differ)."""
     return json.dumps(one, sort_keys=True) == json.dumps(other, sort_keys=True)
 

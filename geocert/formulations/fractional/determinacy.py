@@ -26,6 +26,7 @@ from geocert.core.determinacy import (SIGMAS, SINGULAR, Determinacy, certified_g
                                                interval, numeric_jacobian, proven_document, safely, spread)
 from geocert.core.exact import exact_centroid_image, exact_squared_residuals  # noqa: F401 (callers read them here)
 from geocert.formulations.fractional import fixed_order
+from geocert.formulations.fractional.normalisation import complement, normalised_map
 from geocert.formulations.fractional.columns import solutions, sublevels
 
 PARALLAX_DEGREES = 1.0  # rays meeting at less than this: near-zero parallax
@@ -396,8 +397,6 @@ def map_(source: np.ndarray, target: np.ndarray, matrix: list[list[float]] | Non
     # in the world's coordinates, a central difference of residuals rounded at eps of the data's
     # offset moved the width by multiples of itself 1e8 off the origin over a spread of 1e-3
     # (review 59 class 6).
-    from geocert.formulations.fractional.normalisation import complement, normalised_map
-
     (cs, ss), (ct, st), normalised = normalised_map(source, target, M)
     basis = complement(normalised.ravel())
     xs = np.hstack([ss * (source - cs), np.ones((len(source), 1))])  # the normalised source points

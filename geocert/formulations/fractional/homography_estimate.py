@@ -10,7 +10,8 @@ and a verifier holding them to that much could not tell an interval collapsed on
 from correctly rounded sums (math.fsum), the normalised map computed exactly and rounded once, the
 parameters' basis a Householder reflection (fractional.normalisation, shared with a resection's
 estimate), the Jacobian analytic (elementwise numpy and fixed_order.mul), J'J by fixed_order.mul
-and its eigendecomposition by fixed_order.symmetric_eigen; so the writer and the verifier, which recomputes the estimate by this function, read one width.
+and its eigendecomposition by fixed_order.symmetric_eigen; so the writer and the verifier, which
+recomputes the estimate by this function, read one width.
 """
 
 from __future__ import annotations
