@@ -70,23 +70,32 @@ def client_bucket(request: Request, owner: str) -> str:
     return owner
 
 
-async def rate_limited(request: Request, owner: Caller) -> None:
+async def rate_limited(request: Request, owner: Caller) -> str:
     """At most GEOCERT_RATE_LIMIT_PER_MINUTE requests per key per minute (a fixed window in Redis,
     shared by every API process), per client address without keys (``client_bucket``). On the
-    event loop, with the asyncio client: every /v1 request passes here."""
+    event loop, with the asyncio client: every /v1 request passes here. Returns the caller's
+    owner (``Owner``)."""
     limit = get_settings().rate_limit_per_minute
     if limit <= 0:
-        return
+        return owner
     count, retry_after = await count_request(get_async_redis(), client_bucket(request, owner))
     if count > limit:
         raise ApiProblem(429, f"more than {limit} requests this minute (GEOCERT_RATE_LIMIT_PER_MINUTE)",
                          headers={"Retry-After": str(retry_after)})
+    return owner
+
+
+# The caller, counted against the rate limit: what the job routes take, instead of the router
+# depending on rate_limited and each route on Caller besides. FastAPI walks a dependency's whole
+# tree on every request even when its value is cached (the caller's twice, with its key header),
+# and that walk was a fifth of a small submission's CPU in the app (bench/results/service.md).
+Owner = Annotated[str, Depends(rate_limited)]
 
 
 _OPEN_STREAMS: dict[str, int] = {}  # client_bucket -> event streams open in this process
 
 
-async def stream_slot(request: Request, owner: Caller) -> AsyncIterator[None]:
+async def stream_slot(request: Request, owner: Owner) -> AsyncIterator[None]:
     """Holds one of the caller's GEOCERT_MAX_STREAMS_PER_KEY event-stream slots in this API
     process from the request until its stream has ended (429 when none is free). Runs on the event
     loop, so the count needs no lock; a request-scoped dependency, released after the response."""
