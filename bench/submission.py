@@ -2,7 +2,8 @@
 request's model dump, the kind's parse, the limits, ``JobStore.create`` and queueing the tasks)
 on a body already validated, against an embedded Redis, one thread, no HTTP. Prints per
 submission: CPU and wall milliseconds, the socket writes to Redis (each a round trip: the caller
-waits for its answer) and the Redis commands run, with the machine's load.
+waits for its answer), the Redis commands run and the server's time in them (a script's time
+includes the commands it runs), with the machine's load.
 
     .venv/bin/python -m bench.submission [--tracks 3] [--count 300] [--profile] [--loop | --app]
 
@@ -60,7 +61,9 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--tracks", type=int, default=3, help="tracks a job (the 3 of bench.faults' submissions)")
     parser.add_argument("--count", type=int, default=300, help="submissions measured")
-    parser.add_argument("--profile", action="store_true", help="also print cProfile's top functions")
+    parser.add_argument("--profile", action="store_true", help=(
+        "also print the Python calls a submission and cProfile's top functions (BENCH_SORT: their order, "
+        "BENCH_TOP: how many)"))
     parser.add_argument("--loop", action="store_true", help="the event loop's path (submit_on_loop)")
     parser.add_argument("--app", action="store_true", help="the whole request through the ASGI app")
     parser.add_argument("--parsers", action="store_true", help="uvicorn's h11 against httptools, per request")
@@ -192,10 +195,17 @@ def measure(url: str, tracks: int, count: int, profile: bool, loop: bool = False
           f"{1e3 * wall / count:.2f} ms wall a submission; {writes[0] / count:.2f} socket writes to Redis a "
           f"submission; load average {' '.join(f'{x:.2f}' for x in os.getloadavg())}")
     print("Redis commands a submission: " + ", ".join(f"{name} {calls:g}" for name, calls in commands.items()))
+    # A script's time includes the commands it calls (counted again under their own names).
+    usec = {name.removeprefix("cmdstat_"): stats["usec"] / count for name, stats in counter.info("commandstats").items()}
+    print("Redis server time a submission: " + ", ".join(f"{name} {usec[name]:.1f} us" for name in sorted(usec)
+                                                           if name not in ("config", "info")))
     if profile:
         profiler = cProfile.Profile()
         profiler.runcall(lambda: [submit(index) for index in range(count)])
-        pstats.Stats(profiler).sort_stats("cumulative").print_stats(30)
+        stats = pstats.Stats(profiler)
+        # Python calls a submission: unlike its CPU, the same on a loaded machine as on a quiet one.
+        print(f"Python function calls a submission (cProfile): {stats.total_calls / count:.0f}")
+        stats.sort_stats(os.environ.get("BENCH_SORT", "cumulative")).print_stats(int(os.environ.get("BENCH_TOP", "30")))
 
 
 def messages(count: int) -> None:
