@@ -194,7 +194,7 @@ def loose_gaps():
     import types
 
     from geocert.formulations.bilinear.options import BilinearOptions
-    from geocert.core.declared_options import KEY
+    from geocert.core.declared_options import KEY, declarations
     from geocert.formulations.fractional.options import SearchOptions
 
     def classes(root):
@@ -214,11 +214,13 @@ def loose_gaps():
                 saved.append((entry, entry.metadata))
                 entry.metadata = types.MappingProxyType({**entry.metadata, KEY: dataclasses.replace(
                     declared, bounds={"ge": 0})})
+    declarations.cache_clear()  # read again, loosened
     try:
         yield
     finally:
         for entry, metadata in reversed(saved):
             entry.metadata = metadata
+        declarations.cache_clear()
 
 
 def refusal(document) -> dict | None:

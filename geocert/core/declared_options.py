@@ -7,6 +7,7 @@ command line, the solver and the verifier cannot disagree on what an option may 
 from __future__ import annotations
 
 import dataclasses
+import functools
 from typing import Any
 
 MISSING = dataclasses.MISSING
@@ -45,8 +46,13 @@ def redeclared(owner: type, name: str, default: Any = MISSING, **changes) -> Any
     return dataclasses.field(default=default, default_factory=factory, metadata={KEY: declared})
 
 
+@functools.cache
 def declarations(options_type: type) -> dict[str, Declared]:
-    """The declared options of a dataclass, by name, in its fields' order."""
+    """The declared options of a dataclass, by name, in its fields' order (not to be changed: one
+    dict a class). Kept once read: an options dataclass's check() reads its ranges through here,
+    option by option, on every job's parse, and walking the fields each time was most of parsing
+    a triangulation job's options (bench/results/service.md). Whoever rewrites a field's
+    declaration after reading it clears this (``declarations.cache_clear()``)."""
     return {entry.name: entry.metadata[KEY] for entry in dataclasses.fields(options_type) if KEY in entry.metadata}
 
 

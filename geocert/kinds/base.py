@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import abc
 import dataclasses
+import functools
 import importlib
 import typing
 from typing import Any, Callable
@@ -207,14 +208,12 @@ def options_from(options_type: type, given: dict | None, field: str = "options")
     """Build an options dataclass from a dict, naming any unknown or ill-typed option; the
     dataclass's own check() validates ranges (the same OPTION_RANGES the API's models use)."""
     given = dict(given or {})
-    names = {f.name for f in dataclasses.fields(options_type)}
+    defaults, types = _option_facts(options_type)
     for key in given:
-        if key not in names:
-            raise InputError(f"{field}/{key}", f"unknown option (known: {', '.join(sorted(names))})")
-    defaults = options_type()
-    types = {f.name: str(f.type) for f in dataclasses.fields(options_type)}
+        if key not in types:
+            raise InputError(f"{field}/{key}", f"unknown option (known: {', '.join(sorted(types))})")
     for key, value in given.items():
-        default = getattr(defaults, key)
+        default = defaults[key]
         if isinstance(default, bool):  # before the numbers: a bool is an int to Python
             if not isinstance(value, bool):
                 raise InputError(f"{field}/{key}", "must be true or false")
@@ -231,6 +230,15 @@ def options_from(options_type: type, given: dict | None, field: str = "options")
     options = options_type(**given)
     options.check()
     return options
+
+
+@functools.cache
+def _option_facts(options_type: type) -> tuple[dict, dict]:
+    """An options dataclass's defaults and its fields' types as text, by name: read once a class
+    (options_from read them on every job's parse, a defaults instance made each time)."""
+    defaults = options_type()
+    fields = dataclasses.fields(options_type)
+    return {f.name: getattr(defaults, f.name) for f in fields}, {f.name: str(f.type) for f in fields}
 
 
 def default_options(kind: ProblemKind) -> dict:
