@@ -28,6 +28,12 @@ event loop's producer), CPU a job.
 ``--parse``: the triangulation kind's parse of the Oxford Dinosaur's tracks (Oxford VGG's data,
 4983 tracks; ``--tracks`` fewer), as the API checks a body and a worker reads its chunk, CPU a parse.
 
+Instructions a submission, a figure the machine's load does not move (valgrind's callgrind
+counting only the measured submissions; its "Collected" line over ``--count``):
+
+    BENCH_CALLGRIND=1 valgrind --tool=callgrind --instr-atstart=no --callgrind-out-file=/tmp/cg.%p \
+        .venv/bin/python -m bench.submission --app --count 100
+
 ``--baseline <checkout>``: before and after in one run: this measurement made ``--rounds`` times
 in turn with this checkout's geocert and with that checkout's (each run a process of its own,
 alternating, this bench's code in both), then the ratio of their medians. E.g. the whole request
@@ -180,11 +186,13 @@ def measure(url: str, tracks: int, count: int, profile: bool, loop: bool = False
 
     redis.connection.AbstractConnection.send_packed_command = counted
     redis.asyncio.connection.AbstractConnection.send_packed_command = counted_async
+    _callgrind("on")
     cpu, wall = time.process_time(), time.perf_counter()
     try:
         for index in range(count):
             submit(index)
     finally:
+        _callgrind("off")
         redis.connection.AbstractConnection.send_packed_command = send
         redis.asyncio.connection.AbstractConnection.send_packed_command = send_async
     cpu, wall = time.process_time() - cpu, time.perf_counter() - wall
@@ -206,6 +214,14 @@ def measure(url: str, tracks: int, count: int, profile: bool, loop: bool = False
         # Python calls a submission: unlike its CPU, the same on a loaded machine as on a quiet one.
         print(f"Python function calls a submission (cProfile): {stats.total_calls / count:.0f}")
         stats.sort_stats(os.environ.get("BENCH_SORT", "cumulative")).print_stats(int(os.environ.get("BENCH_TOP", "30")))
+
+
+def _callgrind(state: str) -> None:
+    """Under valgrind's callgrind with BENCH_CALLGRIND set: its instruction counting switched
+    ``state`` ("on", "off"), so that only the measured submissions are counted (started with
+    ``--instr-atstart=no``, the imports and start-up uncounted and run faster)."""
+    if os.environ.get("BENCH_CALLGRIND"):
+        subprocess.run(["callgrind_control", "-i", state, str(os.getpid())], check=True, capture_output=True)
 
 
 def messages(count: int) -> None:
