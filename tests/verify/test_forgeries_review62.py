@@ -87,3 +87,36 @@ def test_a_focal_length_cut_by_its_range_without_at_range_edge_stated_determined
     forged = _without(json.loads(_autocalibrated(6, focal=(300.0, 990.0))), "at_range_edge")
     assert forged["stages"][1]["determinacy"]["determined"] is True
     assert not _valid(forged)
+
+
+# 2. The writer: the direct method's estimate clipped to ranges its answer may lie beyond
+
+@functools.lru_cache(maxsize=None)
+def _direct_below_the_truth() -> str:
+    """The kind's example (six views, f = 1000 px) solved by the direct method with the focal
+    range [300, 990]: its scope is a combination of the ranges ((w11 + w22) / w33 within what they
+    allow), so the certified K may have f beyond 990 (it returns 999.9999)."""
+    from geocert.kinds import get_kind
+
+    job = copy.deepcopy(get_kind("autocalibration").example)
+    job["options"] = {**job.get("options", {}), "certificate": "full", "method": "direct", "chirality": "points",
+                      "intrinsics": {"focal": [300.0, 990.0]}}
+    return json.dumps(solve_job(job))
+
+
+@pytest.mark.slow  # the direct method's solve: about 10-20 s
+@pytest.mark.xfail(strict=True, reason="class 2: the direct method's estimate is clipped to each intrinsic's range "
+                                       "(determinacy.scope_of, clipped_to_scope) though its certified K may lie "
+                                       "beyond it: an interval with lower above upper, refused by the verifier")
+def test_a_direct_result_certified_beyond_a_focal_range_verifies():
+    """What the service answers must verify: status optimal, the stage certified, and its
+    focal_x interval stated as [999.99967, 990.0] (lower above upper, the value 999.99992 outside
+    it), which the verifier refuses (check_contains): a third party is told the certified answer's
+    certificate is invalid."""
+    result = json.loads(_direct_below_the_truth())
+    stage = result["stages"][0]
+    assert result["status"] == "optimal" and stage["certified"] is True
+    assert result["K"][0][0] > 990.0  # within the direct scope, beyond the focal range alone
+    for found in stage["determinacy"]["intervals"]:
+        assert found["lower"] is None or found["upper"] is None or found["lower"] <= found["upper"], found
+    assert _valid(result)
