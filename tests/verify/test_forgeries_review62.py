@@ -9,6 +9,7 @@ import json
 import pytest
 
 from geocert.core.determinacy import fixes
+from geocert.core.geometry import InputError
 from geocert.jobs.runner import solve_job
 from geocert.solvers.autocalibration import scenes
 from geocert.verify.checks import verify_any
@@ -120,3 +121,28 @@ def test_a_direct_result_certified_beyond_a_focal_range_verifies():
     for found in stage["determinacy"]["intervals"]:
         assert found["lower"] is None or found["upper"] is None or found["lower"] <= found["upper"], found
     assert _valid(result)
+
+
+# 3. The writer: a track's point at a camera centre states a null level its verifier refuses
+
+@pytest.mark.xfail(strict=True, reason="class 3: a track's point on a camera centre gets cost_increase null "
+                                       "(fractional.determinacy._finite_tracks: its own level inf), which the "
+                                       "verifier's pooled-level check refuses")
+def test_a_triangulation_of_cameras_sharing_one_centre_is_read_by_its_verifier():
+    """The kind's example with every camera the first one (one centre, no baseline): accepted as
+    input, solved, nothing certified. Track 11's returned point is that centre, where its
+    residuals are not finite, so its own level is inf and its determinacy states cost_increase
+    null (fractional.determinacy._finite_tracks); the verifier, reading the pooled level, refuses
+    the service's own document ("cost_increase is None, below 62866.6") instead of reading it as
+    what it is, a result with nothing certified."""
+    from pathlib import Path
+
+    job = json.loads((Path(__file__).resolve().parents[2] / "examples" / "triangulation.json").read_text())
+    job["data"]["cameras"] = [job["data"]["cameras"][0]] * len(job["data"]["cameras"])
+    try:
+        result = json.loads(json.dumps(solve_job(job)))
+    except InputError:
+        return  # refused as input: one centre triangulates nothing
+    assert not any(track["certified"] for track in result["tracks"])
+    report = verify_any(result)
+    assert report.first_failure["check"] != "returned", report.first_failure
