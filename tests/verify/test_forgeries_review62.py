@@ -146,3 +146,62 @@ def test_a_triangulation_of_cameras_sharing_one_centre_is_read_by_its_verifier()
     assert not any(track["certified"] for track in result["tracks"])
     report = verify_any(result)
     assert report.first_failure["check"] != "returned", report.first_failure
+
+
+# Class 1 on the direct method: its K stage's no_redundancy (the plane family's three constraints)
+
+@functools.lru_cache(maxsize=None)
+def _direct_four_views() -> str:
+    from geocert.kinds import get_kind
+
+    job = copy.deepcopy(get_kind("autocalibration").example)
+    job["data"]["cameras"] = job["data"]["cameras"][:4]
+    job["options"] = {**job.get("options", {}), "certificate": "full", "method": "direct", "chirality": "points"}
+    return json.dumps(solve_job(job))
+
+
+@pytest.mark.slow  # the direct method's solve: about 10 s
+@pytest.mark.xfail(strict=True, reason="class 1: the direct stage's no_redundancy warning is not read again "
+                                       "(verify.autocalibration_estimates.check_direct)")
+def test_a_direct_stage_of_four_views_without_no_redundancy_stated_determined_is_refused():
+    genuine = json.loads(_direct_four_views())
+    assert _codes(genuine["stages"][0]["determinacy"]) == ["no_redundancy"] and _valid(genuine)
+    forged = _without(genuine, "no_redundancy")
+    assert forged["stages"][0]["determinacy"]["determined"] is True
+    assert not _valid(forged)
+
+
+# Held: what the stages' warnings sit beside is read again
+
+def test_an_interval_cut_by_its_range_narrowed_is_refused():
+    """The focal interval the scope cut ([~975, 990]) narrowed by a tenth on its lower side is
+    refused: the walk made again reaches further (autocalibration_estimates._check_holds)."""
+    forged = json.loads(_autocalibrated(6, focal=(300.0, 990.0)))
+    focal = forged["stages"][1]["determinacy"]["intervals"][0]
+    focal["lower"] += 0.1 * (focal["upper"] - focal["lower"])
+    assert not _valid(forged)
+
+
+JSON_EDGES = ("NaN", "Infinity", "-Infinity", "1e400", "-1e400")
+
+
+@pytest.mark.parametrize("spelled", JSON_EDGES)
+def test_a_non_finite_number_spelled_in_json_is_refused(spelled):
+    from geocert.core.strict import load_document
+    from tests.verify.test_forgeries import stored
+
+    text = json.dumps(stored("triangulation_l2l2")).replace('"cost": ', f'"cost": {spelled}, "_": ', 1)
+    report = verify_any(load_document(text))
+    assert not report.valid and report.first_failure["check"] == "format"
+
+
+def test_a_document_nested_past_the_readers_depth_is_refused_not_crashed():
+    from geocert.core.strict import load_document
+    from tests.verify.test_forgeries import stored
+
+    text = json.dumps(stored("triangulation_l2l2"))
+    for depth in (65, 200):
+        report = verify_any(load_document(text[:-1] + ', "extra": ' + "[" * depth + "]" * depth + "}"))
+        assert not report.valid and "nests deeper" in report.first_failure["detail"]
+    with pytest.raises(RecursionError):
+        load_document(text[:-1] + ', "extra": ' + "[" * 100_000 + "]" * 100_000 + "}")
