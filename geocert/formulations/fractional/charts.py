@@ -159,7 +159,15 @@ def normaliser(points: np.ndarray) -> np.ndarray:
     """Similarity (homogeneous) taking the points' centroid to 0 and mean distance to sqrt(dim)."""
     dim = points.shape[1]
     centre = points.mean(axis=0)
-    spread = float(np.mean(np.linalg.norm(points - centre, axis=1))) or 1.0
+    offsets = points - centre
+    # Squares of offsets below 1e-150 underflow and above 1e150 overflow: there the offsets are
+    # read at a power of two bringing the largest near 1, exactly, and the mean scaled back (as
+    # normalisation.normaliser). A spread read as 0 left a tiny world's points unscaled and the
+    # solver's steps underflowing (a resection at 1e-162 returned an all-zero camera). Between,
+    # the code path is unchanged: the charts of documents written before are the same floats.
+    largest = float(np.max(np.abs(offsets))) if offsets.size else 0.0
+    shift = -math.frexp(largest)[1] if 0.0 < largest < 1e-150 or 1e150 < largest < math.inf else 0
+    spread = math.ldexp(float(np.mean(np.linalg.norm(np.ldexp(offsets, shift), axis=1))), -shift) or 1.0
     S = np.eye(dim + 1)
     S[:dim, :dim] *= math.sqrt(dim) / spread
     S[:dim, dim] = -centre * math.sqrt(dim) / spread

@@ -20,6 +20,7 @@ import numpy as np
 
 from geocert.core import summary_notes
 from geocert.core.bnb import Progress
+from geocert.core.geometry import unit_frobenius
 from geocert.formulations.fractional.charts import MapChart, normaliser
 from geocert.formulations.fractional.options import MapOptions
 from geocert.formulations.fractional.resection_bound import resection_bound
@@ -204,7 +205,7 @@ def _sublevel_certified(chart: MapChart, source, target, guess, options: MapOpti
         if not math.isfinite(cost):
             return None
         M = chart.matrix(v)
-        M = M / np.linalg.norm(M)  # the matrix _map_result returns, which the bound is about
+        M = unit_frobenius(M)  # the matrix _map_result returns, which the bound is about
         try:
             found = resection_bound(source, target, M)
         except (ValueError, ArithmeticError, np.linalg.LinAlgError):
@@ -227,7 +228,7 @@ def _map_result(chart: MapChart, source, target, v, options, status, lower, node
     """The result of chart point ``v``. ``scale``: the residual factor of a search's proof (its
     program is checked against the data as the verifier checks it); None for the trivial bound."""
     M = chart.matrix(v)
-    M = M / np.linalg.norm(M)  # positive scale: the reference depth stays positive
+    M = unit_frobenius(M)  # positive scale: the reference depth stays positive
     homogeneous = np.hstack([source, np.ones((len(source), 1))])
     proj = homogeneous @ M.T
     item = MapItem((source, target), options.norm, chart)
