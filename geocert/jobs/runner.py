@@ -181,7 +181,7 @@ def solve_items(kind, parsed, options, indices: range, sink: ProgressSink | None
             solved = kind.solve_batch(parsed, list(chosen), options, tracker.engine_callback, deadline=deadline)
         last = min(len(chosen), len(solved))
         for index, item in zip(chosen, solved):  # before any is stored or streamed (jobs.finite)
-            refuse_non_finite(item, f"/{kind.item_key}/{index}")
+            refuse_non_finite(item, f"/{getattr(kind, 'item_key', 'items')}/{index}")
         for position, (index, item) in enumerate(zip(chosen, solved), 1):
             items.append(item)
             if on_item is not None:
