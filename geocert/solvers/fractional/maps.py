@@ -60,6 +60,9 @@ def dlt(source: np.ndarray, target: np.ndarray) -> np.ndarray:
     return M if np.sum(depths > 0) >= np.sum(depths < 0) else -M
 
 
+UNREPRESENTABLE = ("the map in the data's own units is not representable in floating point: its entries span more "
+                   "than the floats do (coordinates near the smallest normal number, 2.2e-308); rescale the coordinates")
+
 _REASONS = Reasons(
     no_domain_found="no map putting every point at positive depth was found",
     degenerate="the correspondences do not determine the map: the maps within the residual bound form an unbounded set",
@@ -227,8 +230,12 @@ def _map_result(chart: MapChart, source, target, v, options, status, lower, node
                 scale: float | None = None) -> MapResult:
     """The result of chart point ``v``. ``scale``: the residual factor of a search's proof (its
     program is checked against the data as the verifier checks it); None for the trivial bound."""
-    M = chart.matrix(v)
-    M = unit_frobenius(M)  # positive scale: the reference depth stays positive
+    with np.errstate(over="ignore", invalid="ignore"):
+        M = unit_frobenius(chart.matrix(v))  # positive scale: the reference depth stays positive
+    if not np.all(np.isfinite(M)):
+        # Data at the edge of the floats (source coordinates near or below 2.2e-308): the map's
+        # entries in the caller's units span more than the floats do, so no camera can be stated.
+        return MapResult("not_certified", False, nodes=nodes, reason=UNREPRESENTABLE)
     homogeneous = np.hstack([source, np.ones((len(source), 1))])
     proj = homogeneous @ M.T
     item = MapItem((source, target), options.norm, chart)

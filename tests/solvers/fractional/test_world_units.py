@@ -92,3 +92,20 @@ def test_a_triangulation_in_any_world_unit_is_the_metre_answer_scaled(tracks, un
         # local refinements stop within their own tolerances: 1e-9 of the point's size apart
         assert np.abs(X / unit - X0).max() <= 1e-7 * np.abs(X0).max()
     assert _verified(result)
+
+
+def test_a_resection_whose_camera_the_floats_cannot_hold_is_not_certified_with_its_reason(resection):
+    """Source coordinates near the smallest normal float (x1e-307: some are subnormal): the camera
+    in those units would span more than the floats do. The item says so (no matrix, a reason);
+    the solver's residuals once raised a ValueError on its NaN entries."""
+    from geocert.solvers.fractional.maps import UNREPRESENTABLE
+
+    result = solve_job(_resection_in(resection, 1e-307))
+    found = result["maps"][0]
+    assert (found["status"], found["certified"], found["matrix"], found["reason"]) == (
+        "not_certified", False, None, UNREPRESENTABLE)
+    json.dumps(result, allow_nan=False)
+    from geocert.jobs.runner import result_json
+    from geocert.kinds import get_kind
+
+    assert result_json(get_kind("resection"), result) is not None  # the schema takes it as it is
