@@ -41,7 +41,7 @@ def resection() -> dict:
     return job
 
 
-def _resection_in(job: dict, unit: float) -> dict:
+def _source_in(job: dict, unit: float) -> dict:
     job = json.loads(json.dumps(job))
     for entry in job["data"]["maps"]:
         entry["source"] = (np.array(entry["source"]) * unit).tolist()
@@ -49,9 +49,9 @@ def _resection_in(job: dict, unit: float) -> dict:
 
 
 @pytest.mark.parametrize("unit", UNITS)
-def test_a_resection_in_any_world_unit_is_the_metre_answer_scaled(resection, unit):
+def test_a_source_in_any_world_unit_is_the_metre_answer_scaled(resection, unit):
     metres = solve_job(resection)["maps"][0]
-    result = solve_job(_resection_in(resection, unit))
+    result = solve_job(_source_in(resection, unit))
     found = result["maps"][0]
     assert metres["certified"] and found["certified"] and found["status"] == "optimal"
     assert found["cost"] == pytest.approx(metres["cost"], rel=1e-9)
@@ -100,7 +100,7 @@ def test_a_resection_whose_camera_the_floats_cannot_hold_is_not_certified_with_i
     the solver's residuals once raised a ValueError on its NaN entries."""
     from geocert.solvers.fractional.maps import UNREPRESENTABLE
 
-    result = solve_job(_resection_in(resection, 1e-307))
+    result = solve_job(_source_in(resection, 1e-307))
     found = result["maps"][0]
     assert (found["status"], found["certified"], found["matrix"], found["reason"]) == (
         "not_certified", False, None, UNREPRESENTABLE)
@@ -109,3 +109,24 @@ def test_a_resection_whose_camera_the_floats_cannot_hold_is_not_certified_with_i
     from geocert.kinds import get_kind
 
     assert result_json(get_kind("resection"), result) is not None  # the schema takes it as it is
+
+
+@pytest.mark.parametrize("kind", ["homography2", "homography3"])
+@pytest.mark.parametrize("unit", UNITS)
+def test_a_homography_from_any_source_unit_is_the_metre_answer_scaled(kind, unit):
+    """The same for homographies (their source times ``unit``): at 1e-162 both dimensions wrote
+    inf, at 1e-300 they returned wrong uncertified maps (costs 3e5 where 17 is the optimum)."""
+    from geocert.core.geometry import unit_frobenius
+    from tests.support import map_job
+
+    job = map_job(np.random.default_rng(seed("finite62", kind, "L2L2")), kind, 12, "L2L2", maps=2)
+    metres = solve_job(job)["maps"]
+    result = solve_job(_source_in(job, unit))
+    for found, at_metres in zip(result["maps"], metres):
+        assert (found["status"], found["certified"]) == (at_metres["status"], at_metres["certified"])
+        assert found["cost"] == pytest.approx(at_metres["cost"], rel=1e-9)
+        n = len(found["matrix"][0]) - 1
+        H = unit_frobenius(np.array(found["matrix"]) @ np.diag([unit] * n + [1.0]))
+        H0 = np.array(at_metres["matrix"])
+        assert np.abs(H * np.sign(np.sum(H * H0)) - H0).max() <= 1e-9
+    assert any(m["certified"] for m in metres) and _verified(result)
