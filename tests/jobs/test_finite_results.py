@@ -92,3 +92,15 @@ def test_a_stored_item_holding_inf_ends_the_job_failed_naming_it(tmp_path):
     assert ended["status"] == "failed"
     assert ended["error"]["title"] == "Non-finite number in the result"
     assert ended["error"]["errors"][0]["field"] == "/maps/0/cost"
+
+
+@pytest.mark.parametrize("document,field", [
+    ([1.0, "x", math.nan], "/2"), ((1, None, [2.0, -math.inf]), "/2/1"), ({"a": [True, 10**400, math.inf]}, "/a/2"),
+    ({"a": np.array([[1.0, 2.0], [3.0, np.nan]])}, "/a/1/1"), ([np.float32("inf")], "/0"),
+])
+def test_the_fast_path_misses_none(document, field):
+    """The clean document's pass reads a list of numbers at once: a list mixing numbers with
+    other values, or an int beyond the floats, is read member by member."""
+    with pytest.raises(NonFiniteResult) as refused:
+        refuse_non_finite(document)
+    assert refused.value.field == field
