@@ -201,6 +201,22 @@ def lengths(x: np.ndarray, axis: int = -1) -> np.ndarray:
     return np.sqrt((x * x).sum(axis=axis))
 
 
+def unit_frobenius(M: np.ndarray) -> np.ndarray:
+    """M / its Frobenius norm, also where the norm's squares underflow or overflow (a camera in
+    a tiny world unit has entries near 1e300): there M is first brought to a largest entry near 1
+    by an exact power of two. For norms in [1e-150, 1e150] this is M / np.linalg.norm(M), the
+    same floats as before."""
+    with np.errstate(over="ignore", under="ignore"):
+        size = float(np.linalg.norm(M))
+    if 1e-150 < size < 1e150:
+        return M / size
+    largest = float(np.max(np.abs(M)))
+    if not 0.0 < largest < math.inf:
+        return M / size  # zero or not finite: nothing to scale (the caller's checks say why)
+    scaled = np.ldexp(M, -math.frexp(largest)[1])
+    return scaled / np.linalg.norm(scaled)
+
+
 def residual_lengths(residuals: np.ndarray) -> np.ndarray:
     """The 2-norms of image residuals (..., 2) without squaring them (np.hypot): a residual below
     1.5e-162 squares to 0, and a scope check reading its length as 0 let a point whose residual is

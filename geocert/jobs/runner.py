@@ -15,6 +15,7 @@ from geocert.kinds import get_kind, options_from
 from geocert.kinds.documents import certificate_document, finite_or_none
 from geocert.core.bnb import Progress
 from geocert.core.geometry import InputError
+from geocert.jobs.finite import refuse_non_finite
 
 ProgressSink = Callable[[dict], None]
 StopCheck = Callable[[], bool]
@@ -179,6 +180,8 @@ def solve_items(kind, parsed, options, indices: range, sink: ProgressSink | None
         else:
             solved = kind.solve_batch(parsed, list(chosen), options, tracker.engine_callback, deadline=deadline)
         last = min(len(chosen), len(solved))
+        for index, item in zip(chosen, solved):  # before any is stored or streamed (jobs.finite)
+            refuse_non_finite(item, f"/{getattr(kind, 'item_key', 'items')}/{index}")
         for position, (index, item) in enumerate(zip(chosen, solved), 1):
             items.append(item)
             if on_item is not None:
@@ -264,6 +267,7 @@ def assemble(kind, job: dict, options, items: list[dict], stats: dict) -> dict:
     result = kind.assemble(options, items, stats)
     if document is not None:
         result["certificate"] = document
+    refuse_non_finite(result)  # every result is written from here or from solve_items' items
     return result
 
 

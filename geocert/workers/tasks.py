@@ -35,6 +35,7 @@ import time
 from geocert.settings import get_settings
 from geocert.core.geometry import InputError
 from geocert.core.pieces import spread_by
+from geocert.jobs.finite import TITLE as FINITE_TITLE, NonFiniteResult
 from geocert.jobs.runner import (abs_gap_of, assemble, item_counts, item_sums, job_deadline, merged_sums, not_started_item,
                            result_fragment, result_json, result_shell, solve_items, stats_from, streams_result)
 from geocert.kinds import KINDS, get_kind, options_from
@@ -284,6 +285,9 @@ def _solve_started_chunk(jobs: JobStore, job_id: str, start: int, stop: int, req
                       "stopped by Celery's soft time limit")
     except InputError as exc:  # the API validates first, so this is a stored job gone bad
         end_with_error(jobs, job_id, 422, "Invalid job data", str(exc), exc.field)
+    except NonFiniteResult as exc:  # jobs.finite: refused rather than written as null
+        log.error("items %d-%d of job %s: %s", start, stop, job_id, exc)
+        end_with_error(jobs, job_id, 500, FINITE_TITLE, str(exc), exc.field, kind=kind, options=options)
     except REDIS_GONE:
         raise  # not the job's fault: retried (solve_chunk), never recorded as its failure
     except Exception as exc:  # never lose the reason: the job keeps its error
@@ -450,7 +454,14 @@ def end_with_result(jobs: JobStore, job_id: str, kind, options) -> None:
     items = jobs.all_items(job_id, meta["items_total"])
     sums = item_sums(items, abs_gap_of(options))
     stats = stats_from(sums, elapsed)
-    result = assemble(kind, request, options, items, stats)
+    try:
+        result = assemble(kind, request, options, items, stats)
+    except NonFiniteResult as exc:  # the caller holds the claim: end_with_error could not take it
+        log.error("job %s: %s", job_id, exc)
+        jobs.end(job_id, "failed", error={"type": "about:blank", "title": FINITE_TITLE, "status": 500,
+                                          "detail": str(exc), "errors": [{"field": exc.field, "reason": str(exc)}]})
+        after_end(jobs, job_id)
+        return
     _end(jobs, job_id, sums, stats, result=result, result_text=result_json(kind, result))
 
 

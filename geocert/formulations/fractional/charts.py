@@ -24,6 +24,27 @@ def camera_centres(cameras: np.ndarray) -> np.ndarray:
     return centres * np.where(centres[:, 3:4] < 0, -1.0, 1.0)
 
 
+def _spread_shift(offsets: np.ndarray) -> int:
+    """The power of two bringing the largest offset near 1 where the squares of the offsets'
+    lengths underflow (below 1e-150) or overflow (above 1e150); 0 between, where the lengths are
+    computed as they always were (the charts of documents written before are the same floats)."""
+    largest = float(np.max(np.abs(offsets))) if offsets.size else 0.0
+    return -math.frexp(largest)[1] if 0.0 < largest < 1e-150 or 1e150 < largest < math.inf else 0
+
+
+def _near_one(cams: np.ndarray) -> np.ndarray:
+    """Each camera whose largest entry is below 1e-150 or above 1e150 brought near 1 by an exact
+    power of two (a camera is homogeneous: the same camera). In a world unit of 1e-300 m the
+    framed cameras' entries are near 1e-300 and their rows' lengths underflowed to 0; cameras
+    between are untouched (the same floats as before)."""
+    largest = np.max(np.abs(cams), axis=(1, 2))
+    outside = ((largest < 1e-150) | (largest > 1e150)) & (largest > 0) & np.isfinite(largest)
+    if not outside.any():
+        return cams
+    shift = np.where(outside, -np.frexp(np.where(outside, largest, 1.0))[1], 0)
+    return np.ldexp(cams, shift[:, None, None])
+
+
 def _camera_frame(centres: np.ndarray) -> np.ndarray:
     """A 4x4 similarity H (X = H X') centring the camera centres with unit mean distance.
 
@@ -34,7 +55,11 @@ def _camera_frame(centres: np.ndarray) -> np.ndarray:
     if finite.any():
         euclid = centres[finite, :3] / centres[finite, 3:4]
         middle = euclid.sum(axis=0) / len(euclid)  # the mean, without np.mean's overhead
-        spread = float(lengths(euclid - middle, 1).sum() / len(euclid))
+        # A world unit so small (or large) that the lengths' squares underflow (overflow) is read
+        # at an exact power of two: a spread read as 0 left the frame unscaled and the chart's
+        # rows underflowing (a triangulation in a unit of 1e-162 m: the DLT's SVD did not converge).
+        shift = _spread_shift(euclid - middle)
+        spread = math.ldexp(float(lengths(np.ldexp(euclid - middle, shift), 1).sum() / len(euclid)), -shift)
         if not spread > 0:
             spread = 1.0
         H[:3, :3] *= spread
@@ -117,7 +142,7 @@ class Chart:
         centres = camera_centres(cameras)
         reference = _choose_reference(cameras, points, centres)
         frame = _camera_frame(centres)
-        cams = cameras @ frame
+        cams = _near_one(cameras @ frame)
         cams = cams / lengths(cams[:, 2, :3], 1)[:, None, None]
         depth_row = cams[reference, 2]
         _, _, vt = np.linalg.svd(depth_row[None, :])
@@ -159,7 +184,14 @@ def normaliser(points: np.ndarray) -> np.ndarray:
     """Similarity (homogeneous) taking the points' centroid to 0 and mean distance to sqrt(dim)."""
     dim = points.shape[1]
     centre = points.mean(axis=0)
-    spread = float(np.mean(np.linalg.norm(points - centre, axis=1))) or 1.0
+    offsets = points - centre
+    # Squares of offsets below 1e-150 underflow and above 1e150 overflow: there the offsets are
+    # read at a power of two bringing the largest near 1, exactly, and the mean scaled back (as
+    # normalisation.normaliser). A spread read as 0 left a tiny world's points unscaled and the
+    # solver's steps underflowing (a resection at 1e-162 returned an all-zero camera). Between,
+    # the code path is unchanged: the charts of documents written before are the same floats.
+    shift = _spread_shift(offsets)
+    spread = math.ldexp(float(np.mean(np.linalg.norm(np.ldexp(offsets, shift), axis=1))), -shift) or 1.0
     S = np.eye(dim + 1)
     S[:dim, :dim] *= math.sqrt(dim) / spread
     S[:dim, dim] = -centre * math.sqrt(dim) / spread

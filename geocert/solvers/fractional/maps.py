@@ -20,6 +20,7 @@ import numpy as np
 
 from geocert.core import summary_notes
 from geocert.core.bnb import Progress
+from geocert.core.geometry import unit_frobenius
 from geocert.formulations.fractional.charts import MapChart, normaliser
 from geocert.formulations.fractional.options import MapOptions
 from geocert.formulations.fractional.resection_bound import resection_bound
@@ -58,6 +59,9 @@ def dlt(source: np.ndarray, target: np.ndarray) -> np.ndarray:
     depths = M[m] @ np.hstack([source, np.ones((len(source), 1))]).T
     return M if np.sum(depths > 0) >= np.sum(depths < 0) else -M
 
+
+UNREPRESENTABLE = ("the map in the data's own units is not representable in floating point: its entries span more "
+                   "than the floats do (coordinates near the smallest normal number, 2.2e-308); rescale the coordinates")
 
 _REASONS = Reasons(
     no_domain_found="no map putting every point at positive depth was found",
@@ -204,7 +208,7 @@ def _sublevel_certified(chart: MapChart, source, target, guess, options: MapOpti
         if not math.isfinite(cost):
             return None
         M = chart.matrix(v)
-        M = M / np.linalg.norm(M)  # the matrix _map_result returns, which the bound is about
+        M = unit_frobenius(M)  # the matrix _map_result returns, which the bound is about
         try:
             found = resection_bound(source, target, M)
         except (ValueError, ArithmeticError, np.linalg.LinAlgError):
@@ -226,8 +230,12 @@ def _map_result(chart: MapChart, source, target, v, options, status, lower, node
                 scale: float | None = None) -> MapResult:
     """The result of chart point ``v``. ``scale``: the residual factor of a search's proof (its
     program is checked against the data as the verifier checks it); None for the trivial bound."""
-    M = chart.matrix(v)
-    M = M / np.linalg.norm(M)  # positive scale: the reference depth stays positive
+    with np.errstate(over="ignore", invalid="ignore"):
+        M = unit_frobenius(chart.matrix(v))  # positive scale: the reference depth stays positive
+    if not np.all(np.isfinite(M)):
+        # Data at the edge of the floats (source coordinates near or below 2.2e-308): the map's
+        # entries in the caller's units span more than the floats do, so no camera can be stated.
+        return MapResult("not_certified", False, nodes=nodes, reason=UNREPRESENTABLE)
     homogeneous = np.hstack([source, np.ones((len(source), 1))])
     proj = homogeneous @ M.T
     item = MapItem((source, target), options.norm, chart)
