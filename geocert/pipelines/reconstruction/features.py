@@ -8,7 +8,8 @@ nearest is clearly nearer than the second (Lowe's ratio test) and, with ``mutual
 features are each other's nearest neighbour. The kept matches are verified geometrically: a
 fundamental matrix is fitted by RANSAC (OpenCV's USAC MAGSAC++), and a pair whose inliers number
 fewer than ``min_inliers`` contributes nothing (two views of a scene share a fundamental matrix;
-chance matches do not).
+chance matches do not). A pair of few matches gets no more trials than a verified pair, at least
+``min_inliers`` of them inliers, would need (``ransac_trials``).
 
 Which pairs are matched (``pairs``), chosen from the images, never from their order unless asked:
 "exhaustive" every pair; "retrieval" each image with the ``retrieval_neighbours`` images most
