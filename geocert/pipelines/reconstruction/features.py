@@ -43,6 +43,7 @@ from __future__ import annotations
 
 import base64
 import binascii
+import math
 import struct
 import threading
 import time
@@ -463,11 +464,12 @@ def ransac_trials(matches: int, options: FeatureOptions) -> int:
     "RANSAC's trials bounded by the inliers a pair needs"). Under the defaults only pairs of at
     most 30 matches are capped: mostly pairs that verify nothing, which ran to ``ransac_max_iters``."""
     ratio = min(options.min_inliers, matches) / max(matches, 1)
-    if ratio >= 1.0 or options.ransac_confidence >= 1.0:
-        needed = MIN_TRIALS if ratio >= 1.0 else options.ransac_max_iters
+    # the log of a sample's chance to hold an outlier (0 when no ratio is least: min_inliers 0)
+    miss = math.log1p(-(ratio ** SAMPLE_SIZE)) if ratio < 1.0 else -math.inf
+    if miss == 0.0 or options.ransac_confidence >= 1.0:
+        needed = options.ransac_max_iters
     else:
-        needed = int(np.ceil(TRIALS_MULTIPLIER * np.log1p(-options.ransac_confidence)
-                             / np.log1p(-(ratio ** SAMPLE_SIZE))))
+        needed = math.ceil(TRIALS_MULTIPLIER * math.log1p(-options.ransac_confidence) / miss)
     return int(min(options.ransac_max_iters, max(MIN_TRIALS, needed)))
 
 

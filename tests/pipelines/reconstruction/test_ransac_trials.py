@@ -43,6 +43,15 @@ def test_the_trials_are_the_multiplied_rule_at_the_least_inlier_ratio(min_inlier
     assert features.ransac_trials(400, options) == cap  # and not on pairs of many matches
 
 
+def test_no_least_ratio_and_a_low_cap_keep_the_cap():
+    """min_inliers 0 sets no least ratio (every pair its cap, no division by zero); a cap below
+    MIN_TRIALS is still the most a pair gets."""
+    assert features.ransac_trials(50, FeatureOptions(min_inliers=0)) == FeatureOptions().ransac_max_iters
+    assert features.ransac_trials(10**9, FeatureOptions()) == FeatureOptions().ransac_max_iters
+    assert features.ransac_trials(20, FeatureOptions(ransac_max_iters=50)) == 50
+    assert features.ransac_trials(15, FeatureOptions(ransac_max_iters=50)) == 50
+
+
 def test_fit_fundamental_asks_opencv_for_the_bounded_trials(monkeypatch):
     asked = []
     real = cv2.findFundamentalMat
