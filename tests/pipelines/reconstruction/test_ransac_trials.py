@@ -1,8 +1,9 @@
-"""features.ransac_trials: a pair's RANSAC runs no more trials than find an outlier-free sample at
-the stated confidence when only ``min_inliers`` of its matches are inliers (RANSAC's stopping
-rule taken at the least inlier ratio a verified pair can have), so the pairs of a few dozen chance
-matches stop running to ``ransac_max_iters`` (issue 35's CPU); a pair that can verify still does,
-and on real photos the verified pairs and their inliers are the same as at the full cap."""
+"""features.ransac_trials: a pair's RANSAC runs TRIALS_MULTIPLIER times the trials that find a
+sample free of outliers at the stated confidence when only ``min_inliers`` of its matches are
+inliers (RANSAC's stopping rule taken at the least inlier ratio a verified pair can have), at
+most ``ransac_max_iters``, so the pairs of a few dozen chance matches stop running to the cap
+(issue 35's CPU); a pair that verifies at the cap still does, and on real photos the verified
+pairs and their inliers are the same as at the full cap."""
 
 from __future__ import annotations
 
