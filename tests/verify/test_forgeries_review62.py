@@ -224,9 +224,6 @@ def test_an_interval_stated_with_lower_above_upper_is_refused_by_the_walk_check(
 
 # 3. The writer: a track's point at a camera centre states a null level its verifier refuses
 
-@pytest.mark.xfail(strict=True, reason="class 3: a track's point on a camera centre gets cost_increase null "
-                                       "(fractional.determinacy._finite_tracks: its own level inf), which the "
-                                       "verifier's pooled-level check refuses")
 def test_a_triangulation_of_cameras_sharing_one_centre_is_read_by_its_verifier():
     """The kind's example with every camera the first one (one centre, no baseline): accepted as
     input, solved, nothing certified. Track 11's returned point is that centre, where its
