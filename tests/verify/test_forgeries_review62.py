@@ -314,9 +314,6 @@ def _with(document: dict, path: tuple, value) -> dict:
     return forged
 
 
-@pytest.mark.xfail(strict=True, reason="class 4: counts compared with strict.same or != (1.0 == 1), not "
-                                       "strict.same_counts: checks._check_summaries' leaves, "
-                                       "checks._document_items' version, the direct proof's order")
 @pytest.mark.parametrize("name,path", [("triangulation_l2l2", ("tracks", 0, "certificate", "leaves")),
                                        ("resection_l2l2", ("maps", 0, "certificate", "leaves")),
                                        ("bilinear_l2l2", ("frames", 0, "certificate", "leaves")),
