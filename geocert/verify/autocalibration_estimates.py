@@ -185,7 +185,8 @@ def _check_holds(stated: dict, recomputed: list[dict], where: str) -> None:
         if not isinstance(given, dict):
             raise Invalid("returned", f"{where}/intervals/{number} must be an interval")
         lo, hi = own["lower"], own["upper"]
-        # never negative: a slack below 0 would refuse by its sign, not by the walk's reach
+        # never negative: a recomputed interval crossed (lower above upper: the clip before review 62)
+        # gave a negative slack, read as a width; a stated interval crossed holds nothing, refused
         width = max(hi - lo, 0.0) if lo is not None and hi is not None else 0.0
         ends = [given.get(end) for end in ("lower", "upper")]
         if all(isinstance(e, (int, float)) and not isinstance(e, bool) for e in ends) and not ends[0] <= ends[1]:
