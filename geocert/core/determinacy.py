@@ -104,11 +104,17 @@ def interval(name: str, value: float | None, lower: float | None, upper: float |
 
 
 def clip(found: dict, lowest: float | None = None, highest: float | None = None) -> dict:
-    """An interval clipped to what the scope (or physics) allows; the value is left alone."""
-    if found["lower"] is not None and lowest is not None:
-        found["lower"] = max(found["lower"], lowest)
-    if found["upper"] is not None and highest is not None:
-        found["upper"] = min(found["upper"], highest)
+    """An interval clipped to what the scope (or physics) allows; the value is left alone, and the
+    interval always holds it: an end is never moved past the value (a value beyond a bound the
+    caller gives, e.g. a scope other than the one the answer was certified in, is not hidden by an
+    interval with lower above upper: review 62), nor past the other end."""
+    value = found.get("value")
+    lower, upper = found["lower"], found["upper"]
+    if lower is not None and lowest is not None:
+        lower = max(lower, min(e for e in (lowest, value, upper) if e is not None))
+    if upper is not None and highest is not None:
+        upper = min(upper, max(e for e in (highest, value, lower) if e is not None))
+    found["lower"], found["upper"] = lower, upper
     return found
 
 

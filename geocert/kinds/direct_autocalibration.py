@@ -102,7 +102,7 @@ def solve_document(parsed, options: autocalibration_problem.AutocalibrationOptio
                                           determinacy.varying_focal_stage, problem, p, document["Ks"], centres)
         elif p is not None:
             stage["determinacy"] = within(deadline, "the direct stage's determinacy", why, determinacy.metric_stage,
-                                          problem, p, np.array(document["K"]), None, None, centres)
+                                          problem, p, np.array(document["K"]), None, None, centres, True)
         if p is not None:
             stage["determinacy"] = determinacy.with_motion(stage["determinacy"], judged, "the direct stage's determinacy")
         proof = stage["certificate"].get("proof")

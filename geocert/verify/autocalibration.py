@@ -18,7 +18,7 @@ from geocert.formulations.autocalibration import plane_sublevel, proofs
 from geocert.core.certificates import OBJECTIVE_TOLERANCE
 from geocert.core.determinacy import ESTIMATES_FORM, proven_document
 from geocert.core.geometry import InputError, is_number, number_array
-from geocert.core.strict import Invalid, charge, number as _number, numbers as _numbers, same
+from geocert.core.strict import Invalid, charge, number as _number, numbers as _numbers, same, same_counts
 from geocert.verify import autocalibration_estimates, cost_rounding, estimates, residual_claims, structure_check
 from geocert.verify.verification import Verification
 
@@ -943,7 +943,7 @@ def _check_relaxation_figures(result: dict, claim: dict, options: dict) -> None:
         return
     where = "stages/0/certificate"
     order = options.get("relaxation_order")
-    if "order" in summary and not same(summary["order"], order):
+    if "order" in summary and not same_counts(summary["order"], order):
         raise Invalid("returned", f"{where}/order is {summary['order']!r:.40}: the relaxation solved is of the options' "
                                   f"relaxation_order {order!r}")
     proof = claim.get("proof") if claim.get("certified") is True and isinstance(claim.get("proof"), dict) else None

@@ -97,7 +97,7 @@ def check_direct(problem, p: np.ndarray | None, K: Any, Ks: Any, stage: dict, ce
     elif isinstance(K, list):
         w = w_of_K(problem, np.asarray(K, dtype=float))
         if stated is not None:
-            _check_K_stage(problem, p, w, None, stated, "stages/0/determinacy", earlier)
+            _check_K_stage(problem, p, w, None, stated, "stages/0/determinacy", earlier, direct=True)
         omega = metric_relaxation.omega_of(w)
     else:
         return
@@ -106,14 +106,15 @@ def check_direct(problem, p: np.ndarray | None, K: Any, Ks: Any, stage: dict, ce
 
 
 def _check_K_stage(problem, p: np.ndarray, w: np.ndarray, gap: float | None, stated: dict, where: str,
-                   earlier: bool) -> None:
+                   earlier: bool, direct: bool = False) -> None:
     """Today's K stage (``earlier`` False: the document's hash declares the estimates' form) holds
     the writer's intervals made again (metric_intervals: the metric walk and the plane family in
     quadrature) and states the plane family's critical motion. One of a document hashed before
     (the stored ones) is read in the earlier form whatever its intervals state (tolerances were
-    stated before the walks were): it holds its walk or its curvature (_nearer)."""
+    stated before the walks were): it holds its walk or its curvature (_nearer). ``direct``: the
+    direct method's stage, clipped to its own scope (determinacy.direct_scope_of)."""
     if not earlier:
-        found = _walked(writer.metric_intervals, problem, p, w, gap)
+        found = _walked(writer.metric_intervals, problem, p, w, gap, direct)
         if found is not None:
             _check_holds(stated, found["intervals"], where)
             _check_plane_motion(stated, found["family"], where)
@@ -184,7 +185,13 @@ def _check_holds(stated: dict, recomputed: list[dict], where: str) -> None:
         if not isinstance(given, dict):
             raise Invalid("returned", f"{where}/intervals/{number} must be an interval")
         lo, hi = own["lower"], own["upper"]
-        width = (hi - lo) if lo is not None and hi is not None else 0.0
+        # never negative: a recomputed interval crossed (lower above upper: the clip before review 62)
+        # gave a negative slack, read as a width; a stated interval crossed holds nothing, refused
+        width = max(hi - lo, 0.0) if lo is not None and hi is not None else 0.0
+        ends = [given.get(end) for end in ("lower", "upper")]
+        if all(isinstance(e, (int, float)) and not isinstance(e, bool) for e in ends) and not ends[0] <= ends[1]:
+            raise Invalid("returned", f"{where}/intervals/{number} ({own['name']}) states lower {ends[0]!r:.30} "
+                                      f"above upper {ends[1]!r:.30}: an interval holds nothing so")
         slack = WALK_SLACK * width + estimates.VALUE_SLACK * max(abs(own["value"] or 0.0), 1.0)
         for end, mine, inside in (("lower", lo, lambda a, b: a <= b + slack), ("upper", hi, lambda a, b: a >= b - slack)):
             theirs = given.get(end)

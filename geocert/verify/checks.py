@@ -602,7 +602,8 @@ def uncertified_claim(kind: str, data: dict, options: dict, claim: dict) -> None
 def _document_items(document: Any) -> list[dict]:
     if not isinstance(document, dict) or document.get("format") != FORMAT:
         raise Invalid("format", f"not a {FORMAT} document")
-    if document.get("version") != VERSION:
+    # an integer (strict.same_counts): 2.0 == 2 in Python, and a count stated as a float verified (review 62)
+    if not same_counts(document.get("version"), VERSION):
         raise Invalid("format", f"version {document.get('version')!r} is not {VERSION}")
     for key in ("kind", "data", "options", "items", "data_sha256", "problem_sha256"):
         if key not in document:
@@ -982,7 +983,7 @@ def _check_summaries(kind, result: dict, certificate: dict) -> None:
         if "leaves" in summary:
             leaves = proof.get("leaves")
             expected = len(leaves) if isinstance(leaves, list) else 0
-            if not same(summary["leaves"], expected):
+            if not same_counts(summary["leaves"], expected):  # a count: 4.0 is not 4 (review 62)
                 raise Invalid("returned", f"{where}/leaves is {summary['leaves']!r}, its proof has {expected}")
 
 

@@ -28,8 +28,9 @@ free family, e.g. half-turns about perpendicular axes).
 Intervals: the affine stage's plane at infinity (input frame, unit norm) over the planes whose
 modulus residuals cost at most ``cost_increase`` more; the metric stage's focal lengths, skew and
 principal point (pixels) over the omega doing so for the metric cost, combined with the range
-the plane's own family gives, clipped to the intrinsics ranges (the certified scope) and to
-positive focal lengths.
+the plane's own family gives, clipped to the certified scope (the stratified method's: the
+intrinsics ranges; the direct method's: what its combination of them bounds of each quantity,
+direct_scope_of) and to positive focal lengths, never past the value (core.determinacy.clip).
 
 Two warnings say where the data, not the motion, fall short (each makes the stage not
 ``determined``). ``at_range_edge`` where an interval is cut by the scope (its unclipped end
@@ -554,11 +555,26 @@ def range_edge(cut: list[str | None]) -> list[dict]:
 
 def scope_of(problem) -> list[tuple[float | None, float | None]]:
     """Each of NAMES' clip: the intrinsics ranges (the stratified metric stage's certified scope;
-    the direct method's scope is a combination of them, and its estimate is clipped the same)."""
+    the direct method's is not these: direct_scope_of)."""
     r = problem.ranges
     (fl, fu), (al, au), (sl, su) = r["focal"], r["aspect"], r["skew"]
     (ul, uu), (vl, vu) = r["principal_point"]
     return [(max(fl, 0.0), fu), (max(fl * al, 0.0), fu * au), (sl, su), (ul, uu), (vl, vu)]
+
+
+def direct_scope_of(problem) -> list[tuple[float | None, float | None]]:
+    """Each of NAMES' clip for the direct method: its scope holds each view's combination
+    (w11 + w22) / w33 = fx^2 + fy^2 + skew^2 + (u - u0)^2 + (v - v0)^2 (preconditioned) within
+    [low, high] (direct.focal_rows), not each intrinsic within its own range, so its certified K
+    may lie beyond one range (review 62: f = 1000 with the focal range [300, 990]). What that
+    scope bounds of each quantity alone: |each| <= f0 sqrt(high) about K0's (the others 0), the
+    focal lengths positive; no lower end of its own beyond that (the others can make up low)."""
+    from geocert.formulations.autocalibration.direct_sublevel import scope_range
+
+    high = 2.0 * scope_range(problem.unit_ranges)[1]
+    f0, u0, v0 = float(problem.K0[0, 0]), float(problem.K0[0, 2]), float(problem.K0[1, 2])
+    reach = f0 * math.sqrt(high)
+    return [(0.0, reach), (0.0, reach), (-reach, reach), (u0 - reach, u0 + reach), (v0 - reach, v0 + reach)]
 
 
 def metric_walk(problem, p: np.ndarray, w: np.ndarray, gap: float | None) -> dict:
@@ -594,11 +610,12 @@ def metric_walk(problem, p: np.ndarray, w: np.ndarray, gap: float | None) -> dic
                           for k, name in enumerate(NAMES)]}
 
 
-def metric_intervals(problem, p: np.ndarray, w: np.ndarray, gap: float | None) -> dict:
+def metric_intervals(problem, p: np.ndarray, w: np.ndarray, gap: float | None, direct: bool = False) -> dict:
     """The metric stage's intervals at the plane p and omega entries w: the metric walk's and the
     plane family's (the modulus cost's, to its own noise level, the metric fit redone on each plane
-    it reaches) added in quadrature, clipped to the intrinsics ranges; with the walk and the family
-    (the verifier makes them again: the family's refits with the writer's scipy, as the rest of an
+    it reaches) added in quadrature, clipped to the certified scope (the intrinsics ranges;
+    ``direct``: the direct method's, direct_scope_of); with the walk and the family (the verifier
+    makes them again: the family's refits with the writer's scipy, as the rest of an
     autocalibration's check)."""
     walk = metric_walk(problem, p, w, gap)
     residuals, J, value, scales = (walk[k] for k in ("residuals", "J", "value", "scales"))
@@ -614,19 +631,19 @@ def metric_intervals(problem, p: np.ndarray, w: np.ndarray, gap: float | None) -
     lower_end = value - np.hypot(value - walk["lower"], value - lo_p)
     upper_end = value + np.hypot(walk["upper"] - value, hi_p - value)
     clipped = [clipped_to_scope(interval(name, value[k], lower_end[k], upper_end[k], scales[k]), *bounds)
-               for k, (name, bounds) in enumerate(zip(NAMES, scope_of(problem)))]
+               for k, (name, bounds) in enumerate(zip(NAMES, (direct_scope_of if direct else scope_of)(problem)))]
     return {"walk": walk, "family": family, "intervals": [found for found, _ in clipped],
             "cut": [cut for _, cut in clipped]}
 
 
 def metric_stage(problem, p: np.ndarray, K_pixels: np.ndarray, cost: float | None, lower: float | None,
-                 centres: np.ndarray | None) -> dict:
-    """K's intervals (metric_intervals) and the motion's warnings: the DIAC family's and the
-    plane family's."""
+                 centres: np.ndarray | None, direct: bool = False) -> dict:
+    """K's intervals (metric_intervals; ``direct``: the direct method's, clipped to its scope) and
+    the motion's warnings: the DIAC family's and the plane family's."""
     from geocert.formulations.autocalibration.problem import w_of_K
 
     w = w_of_K(problem, K_pixels)
-    found = metric_intervals(problem, p, w, certified_gap(cost, lower))
+    found = metric_intervals(problem, p, w, certified_gap(cost, lower), direct)
     out = found["walk"]["estimate"]
     out.intervals = found["intervals"]
     H = found["walk"]["setup"].H

@@ -40,7 +40,7 @@ from geocert.formulations.autocalibration import problem as autocalibration_prob
 from geocert.formulations.autocalibration.proofs import check_recorded_bound
 from geocert.formulations.autocalibration.problem import CHIRALITY, ORDERS  # the options it reads (problem.py checks them)
 from geocert.core.geometry import InputError
-from geocert.core.strict import Invalid, charge, dual_vector, informational, is_number, record, same
+from geocert.core.strict import Invalid, charge, dual_vector, informational, is_number, record, same, same_counts
 
 RANK_TOLERANCE = 1e-4  # numerical rank: eigenvalues of the moment matrix above this times the largest
 # Chirality pairs a program holds (one moment row each, about a hundred nonzeros): the signed
@@ -323,7 +323,7 @@ def check_proof(setup: DirectSetup, proof: dict, order: int) -> tuple[float, tup
            ("reference", "moment_rank", "eigenvalue_ratio", "sublevel"))  # reference: the verifier's check_claim
     informational(proof.get("moment_rank"), "proof/moment_rank", "integer")  # they explain a bound, prove nothing
     informational(proof.get("eigenvalue_ratio"), "proof/eigenvalue_ratio")
-    if not same(proof.get("order"), order):
+    if not same_counts(proof.get("order"), order):  # a count: 2.0 is not 2 (review 62)
         raise Invalid("program", f"the proof is for relaxation order {proof.get('order')!r}, not {order}")
     check_rank(proof.get("moment_rank"), proof.get("eigenvalue_ratio"), order, "proof")
     excluded, programs = proof.get("excluded"), proof.get("programs")

@@ -23,7 +23,8 @@ import math
 import numpy as np
 
 from geocert.core.determinacy import (SIGMAS, SINGULAR, Determinacy, certified_gap, curvature_intervals,
-                                               interval, numeric_jacobian, proven_document, safely, spread)
+                                               interval, not_analysed, numeric_jacobian, proven_document, safely,
+                                               spread)
 from geocert.core.exact import exact_centroid_image, exact_squared_residuals  # noqa: F401 (callers read them here)
 from geocert.formulations.fractional import fixed_order
 from geocert.formulations.fractional.normalisation import complement, normalised_map
@@ -101,6 +102,8 @@ def track(cameras: np.ndarray, points: np.ndarray, point: list[float] | None, at
     if pooled is not None:  # a floor on delta, as the gap is
         gap = pooled[0] if gap is None else max(gap, pooled[0])
     out = curvature_intervals(J, residuals(X), quantities, gap)
+    if pooled is not None and not math.isfinite(out.cost_increase):
+        return no_level()
     out.level = None if pooled is None else pooled_level(pooled)
     out.proven_intervals = proven_track(sublevel)
     rays = X[None, :] - centres
@@ -304,6 +307,9 @@ def _finite_tracks(cameras, all_centres, tracks: list, X: np.ndarray, costs: np.
     documents = []
     level = None if pooled is None else pooled_level(pooled)  # one text for the job's tracks
     for i in range(len(X)):
+        if pooled is not None and not math.isfinite(delta[i]):
+            documents.append(no_level())
+            continue
         out = Determinacy(cost_increase=float(delta[i]), redundancy=redundancy, level=level)
         scale = float(length[i]) if has_depth[i] else None
         for k in range(4 if has_depth[i] else 3):
@@ -319,6 +325,19 @@ def _finite_tracks(cameras, all_centres, tracks: list, X: np.ndarray, costs: np.
                                            f"{PARALLAX_DEGREES:g}): the depth along them is poorly fixed"})
         documents.append(out.document())
     return documents
+
+
+def no_level() -> dict:
+    """A track read at a pooled level whose own level is not finite: its residuals at the point
+    returned are not (the point on a camera's centre, where a projection has depth 0: cameras
+    sharing one centre leave the depth free and the solver may return it there) or their squares
+    overflow. Its intervals have no level to be read at, so it is stated not analysed (claiming
+    nothing), not with a null cost_increase beside the pooled level's words, which its verifier
+    refused (review 62). A track with no pool keeps its own level's form (cost_increase null,
+    unbounded intervals), which verifies as it did."""
+    return not_analysed("the track's determinacy", "its residuals at the point returned are not finite (the point "
+                        "on a camera's centre, or residuals beyond float range), so it has no level of its own "
+                        f"({SIGMAS:g}^2 times its residual variance) to read intervals at", code="not_analysed")
 
 
 def proven_track(sublevel: dict | None) -> dict | None:
