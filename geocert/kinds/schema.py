@@ -135,7 +135,8 @@ class DeterminacyWarning(BaseModel):
                                   "near_critical_configuration, near_collinear_points, pure_translation, "
                                   "rotation_about_one_axis, orbital_motion, critical_motion, at_range_edge (an "
                                   "interval cut by the intrinsics ranges), no_redundancy (as many residuals as "
-                                  "parameters: the noise not estimated), time_limit (the analysis "
+                                  "parameters: the noise not estimated), few_degrees_of_freedom (the noise "
+                                  "estimated from one degree of freedom: nothing determined), time_limit (the analysis "
                                   "stopped at the job's clock: not analysed), ...")
     detail: str
 
