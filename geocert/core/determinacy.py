@@ -45,13 +45,18 @@ RELATIVE_WIDTH = 0.1  # `determined`: every interval within this fraction of its
 # tolerance out. Form 1: every interval states its ``tolerance`` (null where its quantity has no
 # scale) and ``determined`` is read against it. Form 2 (today's): a level from a fit's own
 # residual variance uses the Student quantile of its degrees of freedom (level_sigmas), where
-# forms 0 and 1 used SIGMAS standard errors whatever the degrees of freedom.
+# forms 0 and 1 used SIGMAS standard errors whatever the degrees of freedom, and an
+# autocalibration's principal point and skew are held to the image's scale (image_scale), not the
+# focal length's.
 FORMS = ({"determinacy": "every interval states its tolerance"},
          {"determinacy": "every interval states its tolerance",
-          "level": "the Student quantile of the residual degrees of freedom"})
+          "level": "the Student quantile of the residual degrees of freedom",
+          "scale": "a principal point's and skew's is half the image's larger side"})
 ESTIMATES_FORM = FORMS[-1]
 CURRENT_FORM = len(FORMS)  # the number of today's form (0: unmarked, k: FORMS[k - 1])
 STUDENT_FORM = 2  # the first form whose levels use the Student quantile
+
+OWN_SCALE_FORM = 2  # the first form giving a principal point and skew a scale of their own (image_scale)
 
 # The form estimates are computed in: today's for a writer; a verifier reading a document of an
 # earlier form recomputes its estimates in that form (``reading``).
@@ -117,6 +122,24 @@ def fixes(interval: dict) -> bool:
     if tolerance is None:
         return True
     return value is not None and upper - value <= tolerance and value - lower <= tolerance
+
+
+def image_scale(image_size, principal_point) -> float | None:
+    """The scale of an autocalibration's principal point and skew (today's form; before
+    OWN_SCALE_FORM, the focal length's, which on the dino, f 3310 px, allowed 331 px, wider than
+    the principal point's whole range): half the image's larger side, from data.image_size; without
+    one, the principal point range's larger width (the default range, the image's middle half, is
+    half the side on each axis, so the two agree). A focal length a tenth off moves a point at the
+    image's edge by a tenth of half the side: a principal point within that tolerance moves every
+    point by no more. None where neither is a positive finite number."""
+    if image_size is not None:
+        side = 0.5 * max(float(image_size[0]), float(image_size[1]))
+    else:
+        try:
+            side = max(float(hi) - float(lo) for lo, hi in principal_point)
+        except (TypeError, ValueError):
+            return None
+    return side if math.isfinite(side) and side > 0 else None
 
 
 def tolerance(scale: float | None) -> float | None:

@@ -127,7 +127,8 @@ class DeterminacyInterval(BaseModel):
     upper: float | None
     tolerance: float | None = Field(None, description="the half-width `determined` allows: 10% of the quantity's "
                                                       "scale (a length's or focal length's value, a principal "
-                                                      "point's focal length); null: bounded suffices")
+                                                      "point's and skew's half the image's larger side); null: "
+                                                      "bounded suffices")
 
 
 class DeterminacyWarning(BaseModel):

@@ -16,7 +16,7 @@ from geocert.formulations.autocalibration import metric_relaxation
 from geocert.formulations.autocalibration import problem as autocalibration_problem
 from geocert.formulations.autocalibration import plane_sublevel, proofs
 from geocert.core.certificates import OBJECTIVE_TOLERANCE
-from geocert.core.determinacy import ESTIMATES_FORM, proven_document
+from geocert.core.determinacy import ESTIMATES_FORM, image_scale, proven_document
 from geocert.core.geometry import InputError, is_number, number_array
 from geocert.core.strict import Invalid, charge, number as _number, numbers as _numbers, same
 from geocert.verify import autocalibration_estimates, cost_rounding, estimates, residual_claims, structure_check
@@ -318,7 +318,8 @@ class AutocalibrationVerification(Verification):
         _check_baseline(result.get("baseline"), problem, p)
         _check_proven_intervals(stages[1], claims[1], stages[0])
         estimates.check_plane(stages[0].get("determinacy"), stages[0].get("plane_at_infinity"), "stages/0/determinacy")
-        estimates.check_intrinsics(stages[1].get("determinacy"), result.get("K"), "stages/1/determinacy")
+        estimates.check_intrinsics(stages[1].get("determinacy"), result.get("K"), "stages/1/determinacy",
+                                   image_scale(problem.image_size, problem.ranges["principal_point"]))
         estimates.check_redundancy(stages[0].get("determinacy"), len(cameras) - 4, "stages/0/determinacy")
         estimates.check_redundancy(stages[1].get("determinacy"), 5 * len(cameras) - 10, "stages/1/determinacy")
         for number, stage in enumerate(stages[:2]):
@@ -846,7 +847,8 @@ def _check_returned_direct(result: dict, certificate: dict, earlier_estimates: b
             raise Invalid("returned", f"{name} is not what the quadric gives")
     _check_direct_proven(result["stages"][0], claim, len(cameras), per_view=bool(options.get("varying_focal")))
     if result.get("Ks") is None:  # one K
-        estimates.check_intrinsics(result["stages"][0].get("determinacy"), result.get("K"), "stages/0/determinacy")
+        estimates.check_intrinsics(result["stages"][0].get("determinacy"), result.get("K"), "stages/0/determinacy",
+                                   image_scale(problem.image_size, problem.ranges["principal_point"]))
         estimates.check_redundancy(result["stages"][0].get("determinacy"), 5 * len(cameras) - 10,
                                    "stages/0/determinacy")
         _check_direct_level(problem, result, result["stages"][0].get("determinacy"), "stages/0/determinacy")

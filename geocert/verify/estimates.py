@@ -29,7 +29,8 @@ from typing import Any
 
 import numpy as np
 
-from geocert.core.determinacy import SIGMAS, Determinacy, certified_gap, cost_increase as level_of, fixes, safely
+from geocert.core.determinacy import (OWN_SCALE_FORM, SIGMAS, Determinacy, certified_gap, cost_increase as level_of,
+                                      fixes, form, safely)
 from geocert.core.geometry import is_number, normalised_cameras
 from geocert.core.warning_codes import MOTION_CODES
 from geocert.core.strict import Invalid, same
@@ -153,13 +154,14 @@ def check_redundancy(determinacy: Any, expected: int, where: str) -> None:
                                   f"residuals beyond its parameters number {expected!r}")
 
 
-def check_intrinsics(determinacy: Any, K: Any, where: str) -> None:
+def check_intrinsics(determinacy: Any, K: Any, where: str, side: float | None = None) -> None:
     """An autocalibration K stage's estimate (autocalibration.determinacy.metric_stage) is about
     the K the result returns: its intervals name the five intrinsics in order, each ``value`` the
     returned K's entry (to 1e-8 of the focal length: the writer reads K back through omega), and
-    each ``tolerance`` a tenth of its scale (the focal lengths their own, the others their
-    mean), so that ``determined`` (check_determined) is judged at the writer's width, not one the
-    document chose."""
+    each ``tolerance`` a tenth of its scale (the focal lengths their own; skew and principal point
+    ``side``, core.determinacy.image_scale of the data and ranges, in a document of today's form,
+    and the focal lengths' mean in one of a form before OWN_SCALE_FORM), so that ``determined``
+    (check_determined) is judged at the writer's width, not one the document chose."""
     if not isinstance(determinacy, dict) or stopped(determinacy) or not isinstance(K, list):
         return
     try:
@@ -168,7 +170,8 @@ def check_intrinsics(determinacy: Any, K: Any, where: str) -> None:
         return  # typed by the returned check of K
     values = (K[0, 0], K[1, 1], K[0, 1], K[0, 2], K[1, 2])
     mean = 0.5 * (abs(K[0, 0]) + abs(K[1, 1]))
-    scales = (K[0, 0], K[1, 1], mean, mean, mean)
+    own = side if side is not None and form() >= OWN_SCALE_FORM else mean
+    scales = (K[0, 0], K[1, 1], own, own, own)
     intervals = determinacy.get("intervals")
     if not isinstance(intervals, list) or [i.get("name") if isinstance(i, dict) else None
                                            for i in intervals] != list(INTRINSICS):

@@ -213,6 +213,27 @@ class TestAutocalibration:
         for name, value in self.TRUTH.items():
             assert interval(metric, name)["lower"] <= value <= interval(metric, name)["upper"]
 
+    def test_the_principal_point_and_skew_are_held_to_the_images_scale(self):
+        """Issue 37 F4: their tolerance is a tenth of half the image's larger side (here 1000 x
+        1000: 50 px), not a tenth of the focal length (100 px here; 331 px on the dino, wider than
+        its principal point's whole range); the focal lengths keep a tenth of their own."""
+        metric = self.stages("sphere")[1]["determinacy"]
+        assert list(scenes.make_scene(12, 0.1, seed=1, motion="sphere").job_data()["image_size"]) == [1000, 1000]
+        for name in ("skew", "principal_u", "principal_v"):
+            assert interval(metric, name)["tolerance"] == pytest.approx(50.0, rel=1e-12)
+        for name in ("focal_x", "focal_y"):
+            found = interval(metric, name)
+            assert found["tolerance"] == pytest.approx(0.1 * found["value"], rel=1e-12)
+
+    def test_the_images_scale_without_an_image_size_is_the_principal_point_ranges(self):
+        from geocert.core.determinacy import image_scale
+        from geocert.formulations.autocalibration.problem import default_ranges
+
+        dino = default_ranges((720, 576))["principal_point"]
+        assert image_scale((720, 576), dino) == image_scale(None, dino) == 360.0  # a tolerance of 36 px
+        assert image_scale(None, [[100.0, 140.0], [0.0, 60.0]]) == 60.0
+        assert image_scale(None, [[1.0, 1.0], [2.0, 2.0]]) is None
+
     def test_a_turntable_is_flagged_and_its_focal_length_is_wide(self):
         ring = self.stages("ring")[1]["determinacy"]
         sphere = self.stages("sphere")[1]["determinacy"]

@@ -76,3 +76,22 @@ def test_todays_six_point_resection_states_the_student_level_and_verifies():
         # the level: the Student quantile's square times the fit's residual variance (its cost over
         # one degree of freedom), or the certified gap where that is larger
         assert determinacy["cost_increase"] >= level_sigmas(1) ** 2 * claim["cost"] * (1 - 1e-9)
+
+
+def test_a_principal_point_stated_at_the_focal_lengths_tolerance_is_refused_in_todays_form():
+    """Issue 37 F4: today's form holds a principal point's and skew's tolerance to a tenth of half
+    the image's larger side; one stated at a tenth of the focal length (form 1's) is refused, and
+    the stored form-1 document, which states that, verifies in its form (above)."""
+    job = get_kind("autocalibration").example
+    result = json.loads(json.dumps(solve_job({**job, "options": {**job.get("options", {}), "certificate": "full"}})))
+    assert verify_any(result).valid
+    metric = result["stages"][1]["determinacy"]
+    side = 0.5 * max(result["certificate"]["data"]["image_size"])
+    focal = 0.5 * (metric["intervals"][0]["value"] + metric["intervals"][1]["value"])
+    assert [i["tolerance"] for i in metric["intervals"][2:]] == pytest.approx([0.1 * side] * 3, rel=1e-12)
+    for found in metric["intervals"][2:]:
+        found["tolerance"] = 0.1 * focal
+    report = verify_any(result)
+    assert not report.valid and "tolerance" in report.first_failure["detail"], report.first_failure
+    earlier = stored("autocalibration_stratified_tolerance_form")["stages"][1]["determinacy"]["intervals"]
+    assert earlier[3]["tolerance"] == pytest.approx(0.1 * 0.5 * (earlier[0]["value"] + earlier[1]["value"]))
