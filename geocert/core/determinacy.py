@@ -45,18 +45,21 @@ RELATIVE_WIDTH = 0.1  # `determined`: every interval within this fraction of its
 # tolerance out. Form 1: every interval states its ``tolerance`` (null where its quantity has no
 # scale) and ``determined`` is read against it. Form 2 (today's): a level from a fit's own
 # residual variance uses the Student quantile of its degrees of freedom (level_sigmas), where
-# forms 0 and 1 used SIGMAS standard errors whatever the degrees of freedom, and an
+# forms 0 and 1 used SIGMAS standard errors whatever the degrees of freedom; an
 # autocalibration's principal point and skew are held to the image's scale (image_scale), not the
-# focal length's.
+# focal length's; and a stage with no redundancy must state no_redundancy (verify.estimates.
+# check_no_redundancy).
 FORMS = ({"determinacy": "every interval states its tolerance"},
          {"determinacy": "every interval states its tolerance",
           "level": "the Student quantile of the residual degrees of freedom",
-          "scale": "a principal point's and skew's is half the image's larger side"})
+          "scale": "a principal point's and skew's is half the image's larger side",
+          "warnings": "no_redundancy where a stage has none"})
 ESTIMATES_FORM = FORMS[-1]
 CURRENT_FORM = len(FORMS)  # the number of today's form (0: unmarked, k: FORMS[k - 1])
 STUDENT_FORM = 2  # the first form whose levels use the Student quantile
 
 OWN_SCALE_FORM = 2  # the first form giving a principal point and skew a scale of their own (image_scale)
+NO_REDUNDANCY_FORM = 2  # the first form whose verifier requires no_redundancy where a stage has none
 
 # The form estimates are computed in: today's for a writer; a verifier reading a document of an
 # earlier form recomputes its estimates in that form (``reading``).

@@ -322,6 +322,9 @@ class AutocalibrationVerification(Verification):
                                    image_scale(problem.image_size, problem.ranges["principal_point"]))
         estimates.check_redundancy(stages[0].get("determinacy"), len(cameras) - 4, "stages/0/determinacy")
         estimates.check_redundancy(stages[1].get("determinacy"), 5 * len(cameras) - 10, "stages/1/determinacy")
+        # the affine stage's modulus constraints, and the metric stage's plane (that fit)
+        estimates.check_no_redundancy(stages[0].get("determinacy"), len(cameras) - 4, "stages/0/determinacy")
+        estimates.check_no_redundancy(stages[1].get("determinacy"), len(cameras) - 4, "stages/1/determinacy")
         for number, stage in enumerate(stages[:2]):
             estimates.check_contains(stage.get("determinacy"), f"stages/{number}/determinacy")
             estimates.check_stage_level(stage.get("determinacy"), stage.get("cost"), stage.get("lower_bound"),
@@ -851,9 +854,14 @@ def _check_returned_direct(result: dict, certificate: dict, earlier_estimates: b
                                    image_scale(problem.image_size, problem.ranges["principal_point"]))
         estimates.check_redundancy(result["stages"][0].get("determinacy"), 5 * len(cameras) - 10,
                                    "stages/0/determinacy")
+        # its plane's share: the modulus constraints (autocalibration.determinacy.metric_stage)
+        estimates.check_no_redundancy(result["stages"][0].get("determinacy"), len(cameras) - 4,
+                                      "stages/0/determinacy")
         _check_direct_level(problem, result, result["stages"][0].get("determinacy"), "stages/0/determinacy")
     else:  # varying focal lengths: an estimate of each view's, of Ks
         estimates.check_focal_lengths(result["stages"][0].get("determinacy"), result["Ks"], "stages/0/determinacy")
+        estimates.check_no_redundancy(result["stages"][0].get("determinacy"), 5 * (len(cameras) - 1) - (len(cameras) + 3),
+                                      "stages/0/determinacy")
         _check_direct_level(problem, result, result["stages"][0].get("determinacy"), "stages/0/determinacy")
     estimates.check_contains(result["stages"][0].get("determinacy"), "stages/0/determinacy")
     p = autocalibration_problem.plane_from_input(problem, np.asarray(result["plane_at_infinity"], dtype=float)) \

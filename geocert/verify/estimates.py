@@ -29,7 +29,7 @@ from typing import Any
 
 import numpy as np
 
-from geocert.core.determinacy import (OWN_SCALE_FORM, SIGMAS, Determinacy, certified_gap, cost_increase as level_of,
+from geocert.core.determinacy import (NO_REDUNDANCY_FORM, OWN_SCALE_FORM, SIGMAS, Determinacy, certified_gap, cost_increase as level_of,
                                       fixes, form, safely)
 from geocert.core.geometry import is_number, normalised_cameras
 from geocert.core.warning_codes import MOTION_CODES
@@ -152,6 +152,23 @@ def check_redundancy(determinacy: Any, expected: int, where: str) -> None:
     if not same(determinacy.get("redundancy"), expected):
         raise Invalid("returned", f"{where}/redundancy is {determinacy.get('redundancy')!r:.30}; the stage's "
                                   f"residuals beyond its parameters number {expected!r}")
+
+
+def check_no_redundancy(determinacy: Any, redundancy: int, where: str) -> None:
+    """In a document of today's form (NO_REDUNDANCY_FORM on), an autocalibration stage whose cost
+    has no residual beyond its parameters (``redundancy``, from the number of views, at most 0:
+    the affine stage's modulus constraints of four views, and the metric or direct K stage whose
+    plane is that exact fit) states the ``no_redundancy`` warning, as its writer
+    (autocalibration.determinacy.no_redundancy) does: without it the stage could claim
+    ``determined`` from an exact fit whatever the noise. An analysis stopped or left out claims
+    nothing (stopped). Documents of earlier forms were not required to state it."""
+    if form() < NO_REDUNDANCY_FORM or redundancy > 0 or not isinstance(determinacy, dict) or stopped(determinacy):
+        return
+    warnings = determinacy.get("warnings")
+    if not isinstance(warnings, list) or "no_redundancy" not in [w.get("code") for w in warnings if isinstance(w, dict)]:
+        raise Invalid("returned", f"{where}/warnings state no no_redundancy: the stage's cost has {redundancy} "
+                                  "residuals beyond its parameters (an exact fit whatever the noise), which its writer "
+                                  "warns of")
 
 
 def check_intrinsics(determinacy: Any, K: Any, where: str, side: float | None = None) -> None:

@@ -23,7 +23,8 @@ from geocert.verify.checks import verify_any
 from tests.support import map_job, seed
 
 EARLIER = Path(__file__).resolve().parents[1] / "data" / "certificates" / "earlier"
-TOLERANCE_FORM = ("resection_six_points_tolerance_form", "autocalibration_stratified_tolerance_form")
+TOLERANCE_FORM = ("resection_six_points_tolerance_form", "autocalibration_stratified_tolerance_form",
+                  "autocalibration_four_views_tolerance_form")
 
 
 def stored(name: str) -> dict:
@@ -95,3 +96,35 @@ def test_a_principal_point_stated_at_the_focal_lengths_tolerance_is_refused_in_t
     assert not report.valid and "tolerance" in report.first_failure["detail"], report.first_failure
     earlier = stored("autocalibration_stratified_tolerance_form")["stages"][1]["determinacy"]["intervals"]
     assert earlier[3]["tolerance"] == pytest.approx(0.1 * 0.5 * (earlier[0]["value"] + earlier[1]["value"]))
+
+
+def _without_no_redundancy(result: dict) -> dict:
+    """The result with every stage's no_redundancy warning left out, ``determined`` restated as the
+    remaining warnings and the intervals give it (so that only the warning's absence is wrong)."""
+    from geocert.core.determinacy import fixes
+
+    result = copy.deepcopy(result)
+    for stage in result["stages"]:
+        determinacy = stage["determinacy"]
+        determinacy["warnings"] = [w for w in determinacy["warnings"] if w["code"] != "no_redundancy"]
+        determinacy["determined"] = all(fixes(i) for i in determinacy["intervals"]) and not determinacy["warnings"]
+    return result
+
+
+def test_four_views_without_no_redundancy_are_refused_in_todays_form_and_not_in_form_1():
+    """Four views: the affine stage's three modulus constraints fit the plane's three unknowns
+    exactly. Today's form requires both stages to warn no_redundancy (issue 37); a stored document
+    of form 1, which was not required to, still verifies with the warnings left out."""
+    from geocert.solvers.autocalibration import scenes
+
+    scene = scenes.make_scene(4, 0.1, seed=1)
+    result = json.loads(json.dumps(solve_job({"kind": "autocalibration", "data": scene.job_data(),
+                                              "options": {"time_limit_s": 60, "certificate": "full"}})))
+    assert verify_any(result).valid
+    assert all("no_redundancy" in [w["code"] for w in stage["determinacy"]["warnings"]] for stage in result["stages"])
+    report = verify_any(_without_no_redundancy(result))
+    assert not report.valid and "no_redundancy" in report.first_failure["detail"], report.first_failure
+    earlier = stored("autocalibration_four_views_tolerance_form")
+    assert verify_any(earlier).valid
+    report = verify_any(_without_no_redundancy(earlier))
+    assert report.valid, report.first_failure

@@ -38,7 +38,18 @@ def autocalibration_stratified_tolerance_form() -> dict:
     return solve_job({**job, "options": {**job.get("options", {}), "certificate": "full"}})
 
 
-CASES = {f.__name__: f for f in (resection_six_points_tolerance_form, autocalibration_stratified_tolerance_form)}
+def autocalibration_four_views_tolerance_form() -> dict:
+    """Four views (three modulus constraints for the plane's three unknowns): both stages warn
+    no_redundancy, which form 1's verifier does not require."""
+    from geocert.solvers.autocalibration import scenes
+
+    scene = scenes.make_scene(4, 0.1, seed=1)
+    return solve_job({"kind": "autocalibration", "data": scene.job_data(),
+                      "options": {"time_limit_s": 60, "certificate": "full"}})
+
+
+CASES = {f.__name__: f for f in (resection_six_points_tolerance_form, autocalibration_stratified_tolerance_form,
+                                 autocalibration_four_views_tolerance_form)}
 
 
 def main(names: list[str]) -> None:
