@@ -186,6 +186,9 @@ class Determinacy(BaseModel):
                                      "intervals beside them are estimated from the local curvature either way")
     proven_intervals: ProvenIntervals | None = Field(None, description="intervals proven within cost_increase of "
                                                                        "the optimum (null: none proven)")
+    proven_reason: str | None = Field(None, description="where proven intervals were asked for and "
+                                                         "proven_intervals is null: why (the time limit ran out "
+                                                         "before the proof finished, the stage not certified, ...)")
     proven_over_planes: ProvenOverPlanes | None = Field(
         None, description="the stratified metric stage's intervals proven over every plane at infinity within "
                           "affine_increase of the affine stage's cost, not only the plane stated (absent: none proven)")

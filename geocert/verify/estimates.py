@@ -128,6 +128,10 @@ def check_determined(determinacy: dict, where: str, earlier: bool = True) -> Non
     except (TypeError, KeyError):
         raise Invalid("returned", f"{where}/intervals: each states lower and upper, and lower, upper, value and "
                                   "tolerance are numbers or null") from None
+    reason = determinacy.get("proven_reason")
+    if reason is not None and (not isinstance(reason, str) or determinacy.get("proven_intervals") is not None):
+        raise Invalid("returned", f"{where}/proven_reason is {reason!r:.60}: a reason is a text, stated only where "
+                                  "proven_intervals is null (why nothing was proven)")
     if determinacy.get("determined") is not expected:
         raise Invalid("returned", f"{where}/determined is {determinacy.get('determined')!r:.20}, its intervals and "
                                   f"warnings give {expected!r} (every interval bounded within its tolerance of its "
