@@ -24,7 +24,8 @@ def unproven(full: bool, certified: bool, proof: dict | None, status: str) -> st
     """Why a stage's intervals asked to be proven cannot be (None: they may be): a proof is read
     off a full certificate of a certified stage."""
     if not full:
-        return "proven intervals are read off the proof's duals, which only a full certificate carries: ask certificate 'full'"
+        return ("proven intervals are read off the proof's duals, which only a full certificate carries: ask "
+                "certificate 'full'")
     if not certified or proof is None:
         return f"the stage is not certified (status {status}): there is no proof to read intervals from"
     return None

@@ -860,8 +860,8 @@ def _check_returned_direct(result: dict, certificate: dict, earlier_estimates: b
         _check_direct_level(problem, result, result["stages"][0].get("determinacy"), "stages/0/determinacy")
     else:  # varying focal lengths: an estimate of each view's, of Ks
         estimates.check_focal_lengths(result["stages"][0].get("determinacy"), result["Ks"], "stages/0/determinacy")
-        estimates.check_no_redundancy(result["stages"][0].get("determinacy"), 5 * (len(cameras) - 1) - (len(cameras) + 3),
-                                      "stages/0/determinacy")
+        estimates.check_no_redundancy(result["stages"][0].get("determinacy"),
+                                      5 * (len(cameras) - 1) - (len(cameras) + 3), "stages/0/determinacy")
         _check_direct_level(problem, result, result["stages"][0].get("determinacy"), "stages/0/determinacy")
     estimates.check_contains(result["stages"][0].get("determinacy"), "stages/0/determinacy")
     p = autocalibration_problem.plane_from_input(problem, np.asarray(result["plane_at_infinity"], dtype=float)) \

@@ -642,7 +642,8 @@ def _problem_form(document: dict, options: dict, names: tuple[str, ...], marks: 
         return names, None, not marks, CURRENT_FORM
     if marks == ESTIMATES_FORM:  # the estimates' earlier marked forms, newest first
         for number in range(CURRENT_FORM - 1, 0, -1):
-            if problem_hash(kind, data, options, names, FORMS[number - 1], values, digest) == document["problem_sha256"]:
+            marked = problem_hash(kind, data, options, names, FORMS[number - 1], values, digest)
+            if marked == document["problem_sha256"]:
                 return names, _earlier_mark(FORMS[number - 1]), False, number
     if marks and problem_hash(kind, data, options, names, values=values, digest=digest) \
             == document["problem_sha256"]:

@@ -29,8 +29,8 @@ from typing import Any
 
 import numpy as np
 
-from geocert.core.determinacy import (NO_REDUNDANCY_FORM, OWN_SCALE_FORM, SIGMAS, Determinacy, certified_gap, cost_increase as level_of,
-                                      fixes, form, safely)
+from geocert.core.determinacy import (NO_REDUNDANCY_FORM, OWN_SCALE_FORM, SIGMAS, Determinacy, certified_gap,
+                                      cost_increase as level_of, fixes, form, safely)
 from geocert.core.geometry import is_number, normalised_cameras
 from geocert.core.warning_codes import MOTION_CODES
 from geocert.core.strict import Invalid, same
@@ -169,7 +169,8 @@ def check_no_redundancy(determinacy: Any, redundancy: int, where: str) -> None:
     if form() < NO_REDUNDANCY_FORM or redundancy > 0 or not isinstance(determinacy, dict) or stopped(determinacy):
         return
     warnings = determinacy.get("warnings")
-    if not isinstance(warnings, list) or "no_redundancy" not in [w.get("code") for w in warnings if isinstance(w, dict)]:
+    codes = [w.get("code") for w in warnings if isinstance(w, dict)] if isinstance(warnings, list) else []
+    if "no_redundancy" not in codes:
         raise Invalid("returned", f"{where}/warnings state no no_redundancy: the stage's cost has {redundancy} "
                                   "residuals beyond its parameters (an exact fit whatever the noise), which its writer "
                                   "warns of")

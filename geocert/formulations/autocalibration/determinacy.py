@@ -520,7 +520,8 @@ def clipped_to_scope(found: dict, lowest: float | None, highest: float | None) -
     the clip hid: its value on (or beyond) a range's end (the optimum pinned there: the data pull
     beyond it), or its end beyond a range's end. A range no wider than the interval's tolerance
     allows (2 tolerances: the default skew's, 2% of the image side against a tenth of half the
-    image's larger side, core.determinacy.image_scale) fixes its quantity by itself, the user's statement of it rather than a search range:
+    image's larger side, core.determinacy.image_scale) fixes its quantity by itself, the user's
+    statement of it rather than a search range:
     an end beyond it is not reported, nor a value on its end where the interval spans it all (the
     data then do not prefer one value in it to another; the default skew pinned at its end over a
     general motion)."""

@@ -23,7 +23,8 @@ import math
 import numpy as np
 
 from geocert.core.determinacy import (SIGMAS, SINGULAR, Determinacy, certified_gap, curvature_intervals,
-                                      few_degrees, interval, level_sigmas, numeric_jacobian, proven_document, safely, spread)
+                                      few_degrees, interval, level_sigmas, numeric_jacobian, proven_document,
+                                      safely, spread)
 from geocert.core.exact import exact_centroid_image, exact_squared_residuals  # noqa: F401 (callers read them here)
 from geocert.formulations.fractional import fixed_order
 from geocert.formulations.fractional.normalisation import complement, normalised_map
