@@ -54,6 +54,13 @@ def rehash(document: dict, earlier: bool = False, marked: bool = False, form: in
     forms = getattr(verification, "earlier_forms", ()) if earlier else ()
     names = forms[-1][0] if forms else getattr(verification, "claim_options", None)
     marks = getattr(verification, "hash_marks", None) if marked else None
+    if form is None and not marked and not earlier:
+        # a document whose data and options are as its hash says keeps its estimates' form (a
+        # changed one cannot be read, and is hashed unmarked, as every stored document is)
+        try:
+            form = estimates_form(document)
+        except Exception:  # noqa: BLE001 (the hashes no longer match: the document was changed)
+            form = None
     if form is not None and getattr(verification, "hash_marks", None):
         marks = FORMS[form - 1] if form > 0 else None
     document["data_sha256"] = data_hash(document["kind"], document["data"])
