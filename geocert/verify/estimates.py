@@ -29,8 +29,8 @@ from typing import Any
 
 import numpy as np
 
-from geocert.core.determinacy import (NO_REDUNDANCY_FORM, OWN_SCALE_FORM, SIGMAS, Determinacy, certified_gap,
-                                      cost_increase as level_of, fixes, form, safely)
+from geocert.core.determinacy import (NO_REDUNDANCY_FORM, OWN_SCALE_FORM, Determinacy, certified_gap,
+                                      cost_increase as level_of, fixes, form, level_sigmas, safely)
 from geocert.core.geometry import is_number, normalised_cameras
 from geocert.core.warning_codes import MOTION_CODES
 from geocert.core.strict import Invalid, same
@@ -334,7 +334,8 @@ def check_pool(determinacy: Any, where: str) -> None:
 
 def check_stage_level(determinacy: Any, cost: Any, lower_bound: Any, where: str) -> None:
     """A stratified stage's ``cost_increase`` is the writer's level (core.determinacy.
-    cost_increase): SIGMAS^2 times the stage's cost over its redundancy, at least its certified
+    cost_increase): the squared quantile of the document's form (level_sigmas) times the stage's
+    cost over its redundancy, at least its certified
     gap (cost - lower_bound), from figures the document states (the writer's residuals are those
     of the stage's own cost: the modulus cost at the plane, the metric cost at omega). The direct
     stage's estimate is of another cost (its DIAC residuals, not its certified objective), and is
@@ -348,8 +349,9 @@ def check_stage_level(determinacy: Any, cost: Any, lower_bound: Any, where: str)
     expected = level_of(float(cost), redundancy, gap)
     if not _close(determinacy.get("cost_increase"), expected, 0.0, NUMBER_SLACK * abs(expected)):
         raise Invalid("returned", f"{where}/cost_increase is {determinacy.get('cost_increase')!r:.30}; the stage's "
-                                  f"cost {cost!r:.20} over its redundancy {redundancy}, times {SIGMAS:g}^2, at least "
-                                  f"its certified gap, gives {expected!r:.30}")
+                                  f"cost {cost!r:.20} over its redundancy {redundancy}, times "
+                                  f"{level_sigmas(redundancy):.6g}^2 (the document's form's quantile), at least its "
+                                  f"certified gap, gives {expected!r:.30}")
 
 
 def stopped(determinacy: dict) -> bool:
