@@ -26,6 +26,7 @@ quantities are evaluated there, not extrapolated from their gradients.
 
 from __future__ import annotations
 
+import functools
 import math
 import time
 from contextlib import contextmanager
@@ -37,12 +38,47 @@ import numpy as np
 SIGMAS = 3.0
 SINGULAR = 1e-10  # an eigenvalue of J'J below this fraction of the largest: a direction the data do not fix
 RELATIVE_WIDTH = 0.1  # `determined`: every interval within this fraction of its quantity's scale of the value
-# The estimates' form, which a kind stating them declares through its problem hash (certificates.
-# problem_hash's marks; Verification.hash_marks): every interval states its ``tolerance`` (null
-# where its quantity has no scale) and ``determined`` is read against it. Documents written
-# before intervals stated one hash no mark, and their ``determined`` meant bounded; without the
-# mark a document could choose that older reading by leaving every tolerance out.
-ESTIMATES_FORM = {"determinacy": "every interval states its tolerance"}
+# The estimates' forms, oldest first, each the mark a kind stating them declares through its
+# problem hash (certificates.problem_hash's marks; Verification.hash_marks). Documents written
+# before intervals stated a tolerance hash no mark (form 0), and their ``determined`` meant
+# bounded; without a mark a document could choose that older reading by leaving every
+# tolerance out. Form 1: every interval states its ``tolerance`` (null where its quantity has no
+# scale) and ``determined`` is read against it. Form 2 (today's): a level from a fit's own
+# residual variance uses the Student quantile of its degrees of freedom (level_sigmas), where
+# forms 0 and 1 used SIGMAS standard errors whatever the degrees of freedom; an
+# autocalibration's principal point and skew are held to the image's scale (image_scale), not the
+# focal length's; and a stage with no redundancy must state no_redundancy (verify.estimates.
+# check_no_redundancy).
+FORMS = ({"determinacy": "every interval states its tolerance"},
+         {"determinacy": "every interval states its tolerance",
+          "level": "the Student quantile of the residual degrees of freedom",
+          "scale": "a principal point's and skew's is half the image's larger side",
+          "warnings": "no_redundancy where a stage has none"})
+ESTIMATES_FORM = FORMS[-1]
+CURRENT_FORM = len(FORMS)  # the number of today's form (0: unmarked, k: FORMS[k - 1])
+STUDENT_FORM = 2  # the first form whose levels use the Student quantile
+
+OWN_SCALE_FORM = 2  # the first form giving a principal point and skew a scale of their own (image_scale)
+NO_REDUNDANCY_FORM = 2  # the first form whose verifier requires no_redundancy where a stage has none
+
+# The form estimates are computed in: today's for a writer; a verifier reading a document of an
+# earlier form recomputes its estimates in that form (``reading``).
+_FORM: ContextVar[int] = ContextVar("determinacy_form", default=CURRENT_FORM)
+
+
+def form() -> int:
+    """The number of the form estimates are computed in (CURRENT_FORM unless ``reading``)."""
+    return _FORM.get()
+
+
+@contextmanager
+def reading(number: int):
+    """Estimates computed in form ``number`` (a document of that form read again)."""
+    token = _FORM.set(number)
+    try:
+        yield
+    finally:
+        _FORM.reset(token)
 
 
 @dataclass
@@ -89,6 +125,24 @@ def fixes(interval: dict) -> bool:
     if tolerance is None:
         return True
     return value is not None and upper - value <= tolerance and value - lower <= tolerance
+
+
+def image_scale(image_size, principal_point) -> float | None:
+    """The scale of an autocalibration's principal point and skew (today's form; before
+    OWN_SCALE_FORM, the focal length's, which on the dino, f 3310 px, allowed 331 px, wider than
+    the principal point's whole range): half the image's larger side, from data.image_size; without
+    one, the principal point range's larger width (the default range, the image's middle half, is
+    half the side on each axis, so the two agree). A focal length a tenth off moves a point at the
+    image's edge by a tenth of half the side: a principal point within that tolerance moves every
+    point by no more. None where neither is a positive finite number."""
+    if image_size is not None:
+        side = 0.5 * max(float(image_size[0]), float(image_size[1]))
+    else:
+        try:
+            side = max(float(hi) - float(lo) for lo, hi in principal_point)
+        except (TypeError, ValueError):
+            return None
+    return side if math.isfinite(side) and side > 0 else None
 
 
 def tolerance(scale: float | None) -> float | None:
@@ -199,7 +253,7 @@ def numeric_jacobian(function, theta: np.ndarray, step: float = 1e-6) -> np.ndar
 
 def curvature_intervals(J: np.ndarray, residuals: np.ndarray, quantities: dict[str, tuple],
                         gap: float | None = None, sigmas: float = SIGMAS,
-                        squared_sum: float | None = None) -> Determinacy:
+                        squared_sum: float | None = None, small_sample: bool = True) -> Determinacy:
     """Intervals for quantities (name -> (value, gradient in the parameters[, scale])) around an
     optimum with residual Jacobian J (n x p) and residuals r; ``squared_sum`` in place of the float
     r'r where the caller computes it exactly (core.exact.exact_squared_residuals)."""
@@ -208,24 +262,114 @@ def curvature_intervals(J: np.ndarray, residuals: np.ndarray, quantities: dict[s
     n, p = J.shape
     information = J.T @ J if np.all(np.isfinite(J)) else np.full((p, p), np.nan)
     total = float(r @ r) if squared_sum is None else float(squared_sum)
-    return information_intervals(information, total, n - p, quantities, gap, sigmas)
+    return information_intervals(information, total, n - p, quantities, gap, sigmas, small_sample)
 
 
-def cost_increase(cost: float, redundancy: int, gap: float | None = None, sigmas: float = SIGMAS) -> float:
-    """delta: sigmas^2 times the fit's residual variance, never less than the certified gap."""
-    delta = sigmas ** 2 * cost / redundancy if redundancy > 0 else 0.0
+def cost_increase(cost: float, redundancy: int, gap: float | None = None, sigmas: float = SIGMAS,
+                  small_sample: bool = True) -> float:
+    """delta: the squared quantile (level_sigmas: the Student quantile of ``redundancy`` degrees of
+    freedom as covering as ``sigmas`` standard errors) times the fit's residual variance, never
+    less than the certified gap. ``small_sample`` False: ``sigmas`` itself, for a level floored by a
+    pooled variance that carries its own Student quantile (a triangulation track's)."""
+    factor = level_sigmas(redundancy, sigmas) if small_sample else sigmas
+    delta = factor ** 2 * cost / redundancy if redundancy > 0 else 0.0
     if gap is not None and math.isfinite(gap):
         delta = max(delta, gap)
     return delta
 
 
+def level_sigmas(redundancy: int, sigmas: float = SIGMAS) -> float:
+    """The factor a fit's standard error is multiplied by for an interval covering as often as
+    ``sigmas`` standard errors of a normal estimate (two-sided, erf(sigmas / sqrt 2): 99.73% for
+    3). In today's form (STUDENT_FORM on) the variance is estimated from ``redundancy`` degrees of
+    freedom, so the factor is the Student quantile of that many: 235.8 for one, 19.21 for two,
+    3.96 for ten, 3.008 for a thousand (a resection from 6 points has one: with ``sigmas`` itself
+    its intervals covered the truth about 85% of the time). Earlier forms: ``sigmas``. Pure Python
+    (math only), so the writer and the verifier compute the same figure."""
+    if form() < STUDENT_FORM or redundancy <= 0:
+        return float(sigmas)
+    return student_quantile(int(redundancy), math.erf(sigmas / math.sqrt(2.0)))
+
+
+FEWEST_DEGREES = 2  # today's form: a level estimated from fewer degrees of freedom is never `determined`
+
+
+def few_degrees(redundancy: int) -> list[dict]:
+    """Today's form (STUDENT_FORM on): the ``few_degrees_of_freedom`` warning of a level estimated
+    from its own residuals with fewer than FEWEST_DEGREES degrees of freedom (none otherwise, and
+    none for 0: no_redundancy's). From one, the noise estimate is one residual's size, near 0 often
+    enough that an interval judged narrow is narrow because the estimate is: at the Student level
+    the `determined` centres of 6-point resections (one degree of freedom) still missed the truth
+    5 times in 37 on the Model House at 0.1 px, where 7-point ones (three) missed 2 in 198."""
+    if form() < STUDENT_FORM or not 0 < redundancy < FEWEST_DEGREES:
+        return []
+    return [{"code": "few_degrees_of_freedom",
+             "detail": f"the noise level is estimated from {redundancy} degree of freedom (residuals beyond the "
+                       "parameters): its estimate is often far below the truth, and an interval that looks narrow "
+                       "may be narrow only because the estimate is, so nothing is determined. More data fix it"}]
+
+
+@functools.lru_cache(maxsize=4096)
+def student_quantile(dof: int, coverage: float) -> float:
+    """t such that P(|T| <= t) = coverage for T Student-distributed with ``dof`` degrees of
+    freedom: bisection on the two-sided tail I_{dof / (dof + t^2)}(dof / 2, 1 / 2)."""
+    tail = 1.0 - coverage
+    lo, hi = 0.0, 1.0
+    while _student_tail(dof, hi) > tail:
+        lo, hi = hi, 2.0 * hi
+    for _ in range(2000):
+        middle = 0.5 * (lo + hi)
+        if middle in (lo, hi):
+            break
+        lo, hi = (middle, hi) if _student_tail(dof, middle) > tail else (lo, middle)
+    return hi
+
+
+def _student_tail(dof: int, t: float) -> float:
+    """P(|T| > t), T Student with ``dof`` degrees of freedom."""
+    return _incomplete_beta(0.5 * dof, 0.5, dof / (dof + t * t))
+
+
+def _incomplete_beta(a: float, b: float, x: float) -> float:
+    """The regularised incomplete beta function I_x(a, b), by its continued fraction (Lentz), on
+    the side where it converges quickly."""
+    if x <= 0.0:
+        return 0.0
+    if x >= 1.0:
+        return 1.0
+    front = math.exp(math.lgamma(a + b) - math.lgamma(a) - math.lgamma(b) + a * math.log(x) + b * math.log1p(-x))
+    if x < (a + 1.0) / (a + b + 2.0):
+        return front * _beta_fraction(a, b, x) / a
+    return 1.0 - front * _beta_fraction(b, a, 1.0 - x) / b
+
+
+def _beta_fraction(a: float, b: float, x: float) -> float:
+    tiny = 1e-300
+    c, d = 1.0, 1.0 - (a + b) * x / (a + 1.0)
+    d = 1.0 / (d if abs(d) > tiny else tiny)
+    h = d
+    for m in range(1, 100000):
+        for numerator in (m * (b - m) * x / ((a + 2 * m - 1) * (a + 2 * m)),
+                          -(a + m) * (a + b + m) * x / ((a + 2 * m) * (a + 2 * m + 1))):
+            d = 1.0 + numerator * d
+            d = 1.0 / (d if abs(d) > tiny else tiny)
+            c = 1.0 + numerator / c
+            c = c if abs(c) > tiny else tiny
+            h *= d * c
+        if abs(d * c - 1.0) < 1e-16:
+            break
+    return h
+
+
 def information_intervals(information: np.ndarray, cost: float, redundancy: int,
                           quantities: dict[str, tuple], gap: float | None = None,
-                          sigmas: float = SIGMAS) -> Determinacy:
+                          sigmas: float = SIGMAS, small_sample: bool = True) -> Determinacy:
     """The same from J'J itself (or a Schur complement of it, for parameters of interest with the
-    others eliminated), the squared residuals' sum and n - p."""
-    delta = cost_increase(cost, redundancy, gap, sigmas)
+    others eliminated), the squared residuals' sum and n - p (``small_sample``: cost_increase's)."""
+    delta = cost_increase(cost, redundancy, gap, sigmas, small_sample)
     out = Determinacy(cost_increase=delta, redundancy=redundancy)
+    if small_sample:
+        out.warnings += few_degrees(redundancy)
     if not (np.all(np.isfinite(information)) and math.isfinite(delta)):
         for name, (value, _, *scale) in quantities.items():
             out.intervals.append(interval(name, value, None, None, *scale))

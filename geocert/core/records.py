@@ -110,6 +110,7 @@ WARNING = record("code", "detail", codes=WARNING_CODES)
 
 # Determinacy (kinds.schema.Determinacy, written by core.determinacy and each kind's own).
 DETERMINACY = record("method", "proven", "determined", "level", "cost_increase", "redundancy", "pooled_tracks",
+                     "proven_reason",
                      proven_intervals=record("cost_increase", "level", intervals=record("name", "lower", "upper", "reason")),
                      proven_over_planes=record("cost_increase", "affine_increase", "level",
                                                intervals=record("name", "lower", "upper")),

@@ -10,7 +10,9 @@ from __future__ import annotations
 DETERMINACY_CODES = ("not_analysed", "at_infinity", "near_zero_parallax", "near_coplanar_points", "near_collinear_points",
                      "near_critical_configuration", "near_dependent_basis", "near_parallel_lines",
                      # autocalibration's stages: an interval the scope cut, a cost with no redundancy
-                     "at_range_edge", "no_redundancy")
+                     "at_range_edge", "no_redundancy",
+                     # a level estimated from fewer than core.determinacy.FEWEST_DEGREES degrees of freedom
+                     "few_degrees_of_freedom")
 # Motions for which constant intrinsics are not fixed (autocalibration.determinacy.motion_name).
 MOTION_CODES = ("pure_translation", "orbital_motion", "rotation_about_one_axis", "critical_motion")
 # A reconstruction's summary (pipelines.reconstruction.claims, kinds.reconstruction).

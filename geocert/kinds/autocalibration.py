@@ -15,7 +15,7 @@ import numpy as np
 from pydantic import BaseModel, Field
 
 from geocert.kinds.base import ProblemKind
-from geocert.kinds.autocalibration_stages import ANALYSIS_GRACE_S, self_check_stages, stage_document
+from geocert.kinds.autocalibration_stages import ANALYSIS_GRACE_S, self_check_stages, stage_document, unproven
 from geocert.kinds.documents import finite_or_none
 from geocert.kinds.schema import Camera, CertificateDocument, Determinacy, Finite, JobBase, JobStats, Strict, options_model
 from geocert.formulations.autocalibration import metric_relaxation
@@ -334,23 +334,27 @@ class AutocalibrationKind(ProblemKind):
 def _prove_intervals(problem: autocalibration_problem.Problem, result, stage: dict, proof: dict,
                      time_limit_s: float) -> None:
     """The metric stage's proven intervals at its determinacy's cost increase: into its proof
-    (``sublevel``) and its determinacy (``proven_intervals``), when the search proves any."""
+    (``sublevel``) and its determinacy (``proven_intervals``), when the search proves any.
+    Returns why none was proven (None: proven)."""
     from geocert.solvers.autocalibration import metric_sublevel
     from geocert.verify.autocalibration import proven_metric
 
     document = stage["determinacy"]
     increase = document.get("cost_increase")
     if increase is None or stage["cost"] is None:
-        return
+        return "the stage states no cost or no cost increase to prove intervals at (its analysis did not finish)"
     try:
         found = metric_sublevel.prove(problem, result.p, result.metric.unit, stage["cost"], increase, time_limit_s)
-    except (ValueError, ArithmeticError, np.linalg.LinAlgError):
-        found = None
+    except (ValueError, ArithmeticError, np.linalg.LinAlgError) as exc:
+        return f"the proof of K's intervals failed ({type(exc).__name__}: {str(exc)[:200]})"
     if found is None:
-        return
+        return (f"the search for K's intervals proved none within its {time_limit_s:.3g} s (the least of the job's "
+                "time limit, 20 s and the time left): no finite level, a tightening that failed, or a proof its own "
+                "check refused")
     proof["sublevel"] = found
     document["proven_intervals"] = proven_metric(proof["sublevel"])
     document["proven"] = True
+    return None
 
 
 def _prove_over_planes(problem: autocalibration_problem.Problem, result, affine_stage: dict, stage: dict,
@@ -459,16 +463,20 @@ def stratified_item(parsed: Parsed, options: autocalibration_problem.Autocalibra
                    np.array(document["K"]), metric_stage["cost"], metric_stage["lower_bound"], centres),
             judged, "the metric stage's determinacy")
         proof = metric_stage["certificate"].get("proof")
-        if prove_intervals and full and proof is not None and metric_stage["certified"] \
-                and metric_stage["determinacy"] is not None:
+        # every null proven_intervals the proof was asked for says why (issue 37 F5)
+        why_not = unproven(full, metric_stage["certified"], proof, metric_stage["status"]) if prove_intervals else None
+        if prove_intervals and why_not is None and metric_stage["determinacy"] is not None:
             left = math.inf if deadline is None else deadline - time.monotonic()
-            if left > 0:
+            why_not = ("the job's time limit (options.time_limit_s) had passed before the proof of K's intervals could "
+                       "start: the solve and its determinacy took it") if left <= 0 else \
                 _prove_intervals(problem, result, metric_stage, proof, min(options.time_limit_s, 20.0, left))
             # the planes' regions are proved side by side whether or not the affine search finished
             left = math.inf if deadline is None else deadline - time.monotonic()
             if options.prove_intervals_over_planes and isinstance(affine_stage.get("determinacy"), dict) \
                     and "sublevel" in proof and left > 0:
                 _prove_over_planes(problem, result, affine_stage, metric_stage, proof)
+        if why_not is not None and isinstance(metric_stage["determinacy"], dict):
+            metric_stage["determinacy"]["proven_reason"] = why_not
     if result.baseline is not None:
         Kb = problem.K0 @ autocalibration_problem.upper_triangular_root(
             metric_relaxation.omega_of(result.baseline["w"])) \

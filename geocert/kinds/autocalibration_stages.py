@@ -20,6 +20,17 @@ from geocert.verify.checks import verify_arrays
 ANALYSIS_GRACE_S = 2.0
 
 
+def unproven(full: bool, certified: bool, proof: dict | None, status: str) -> str | None:
+    """Why a stage's intervals asked to be proven cannot be (None: they may be): a proof is read
+    off a full certificate of a certified stage."""
+    if not full:
+        return ("proven intervals are read off the proof's duals, which only a full certificate carries: ask "
+                "certificate 'full'")
+    if not certified or proof is None:
+        return f"the stage is not certified (status {status}): there is no proof to read intervals from"
+    return None
+
+
 def stage_document(name: str, status: str, certified: bool, cost: float, lower: float, nodes: int, elapsed: float,
                    reason: str | None, rel_gap: float, abs_gap: float, scope: str, proof: dict | None) -> dict:
     """A stage's figures as the result states them: certified only when its gap as returned meets

@@ -10,7 +10,7 @@ import time
 
 import numpy as np
 
-from geocert.kinds.autocalibration_stages import ANALYSIS_GRACE_S, self_check_stages, stage_document
+from geocert.kinds.autocalibration_stages import ANALYSIS_GRACE_S, self_check_stages, stage_document, unproven
 from geocert.formulations.autocalibration import direct
 from geocert.formulations.autocalibration import direct_relaxation
 from geocert.formulations.autocalibration import problem as autocalibration_problem
@@ -107,10 +107,15 @@ def solve_document(parsed, options: autocalibration_problem.AutocalibrationOptio
             stage["determinacy"] = determinacy.with_motion(stage["determinacy"], judged, "the direct stage's determinacy")
         proof = stage["certificate"].get("proof")
         asked = options.prove_focal_interval or options.prove_intrinsics_intervals
-        if p is not None and asked and options.certificate == "full" and proof is not None \
-                and stage["certified"] and stage["determinacy"] is not None:
-            _prove_focal(setup, result, stage, proof, deadline, options.varying_focal,
-                         options.prove_intrinsics_intervals and not options.varying_focal)
+        if p is not None and asked and isinstance(stage["determinacy"], dict):
+            # every null proven_intervals asked for says why (issue 37 F5: a proof the deadline
+            # stopped left it null with no word)
+            why_not = unproven(options.certificate == "full", stage["certified"], proof, stage["status"])
+            if why_not is None:
+                why_not = _prove_focal(setup, result, stage, proof, deadline, options.varying_focal,
+                                       options.prove_intrinsics_intervals and not options.varying_focal)
+            if why_not is not None:
+                stage["determinacy"]["proven_reason"] = why_not
     stages = [stage]
     if checking:
         self_check_stages(parsed, dataclasses.replace(options), stages)
@@ -119,12 +124,12 @@ def solve_document(parsed, options: autocalibration_problem.AutocalibrationOptio
 
 
 def _prove_focal(setup: direct.DirectSetup, result, stage: dict, proof: dict, deadline: float,
-                 varying_focal: bool, intrinsics: bool = False) -> None:
+                 varying_focal: bool, intrinsics: bool = False) -> str | None:
     """The focal length's proven interval (direct_sublevel; each view's with ``varying_focal``) at
     the cost increase direct_sublevel.cost_increase states: into the stage's proof (``sublevel``)
     and its determinacy (``proven_intervals``), when the search ends before the job's deadline.
     ``intrinsics``: the other intrinsics' too (direct_intrinsics), over the same set, those the
-    deadline leaves unproven stated null."""
+    deadline leaves unproven stated null. Returns why nothing was proven (None: proven)."""
     from geocert.solvers.autocalibration import direct_solve
     from geocert.formulations.autocalibration import direct_intrinsics, direct_sublevel
 
@@ -135,15 +140,26 @@ def _prove_focal(setup: direct.DirectSetup, result, stage: dict, proof: dict, de
             raise direct_solve.Stopped("time_limit", "the job's deadline")
 
     prove = direct_solve.prove_focal_lengths if varying_focal else direct_solve.prove_focal
+    what = "each view's focal length" if varying_focal else "the focal length"
+    after = " (the other intrinsics' proofs, asked for, come after it and were not started)" if intrinsics else ""
+    started = time.monotonic()
+    if started > deadline:
+        return (f"the job's time limit (options.time_limit_s) had passed before the proof of {what}'s interval "
+                f"could start: the solve and its determinacy took it{after}")
     try:
         found = prove(setup, result.Q, stage["cost"], increase, check)
-    except (direct_solve.Stopped, ValueError, ArithmeticError, np.linalg.LinAlgError):
-        found = None
+    except direct_solve.Stopped:
+        return (f"the job's time limit (options.time_limit_s) ran out {time.monotonic() - started:.3g} s into the "
+                f"proof of {what}'s interval, before it finished: nothing was proven{after}")
+    except (ValueError, ArithmeticError, np.linalg.LinAlgError) as exc:
+        return f"the proof of {what}'s interval failed ({type(exc).__name__}: {str(exc)[:200]}){after}"
     if found is None:
-        return
+        return (f"no dual of {what}'s interval programs proved an end (their solves stalled, or no safe bound "
+                f"was above 0){after}")
     if intrinsics:
         found["intrinsics"] = direct_solve.prove_intrinsics(setup, result.Q, stage["cost"], increase, check)
     proof["sublevel"] = found
     read = direct_sublevel.proven_views_document if varying_focal else direct_intrinsics.proven_document
     stage["determinacy"]["proven_intervals"] = read(found)
     stage["determinacy"]["proven"] = True
+    return None

@@ -127,7 +127,8 @@ class DeterminacyInterval(BaseModel):
     upper: float | None
     tolerance: float | None = Field(None, description="the half-width `determined` allows: 10% of the quantity's "
                                                       "scale (a length's or focal length's value, a principal "
-                                                      "point's focal length); null: bounded suffices")
+                                                      "point's and skew's half the image's larger side); null: "
+                                                      "bounded suffices")
 
 
 class DeterminacyWarning(BaseModel):
@@ -135,7 +136,8 @@ class DeterminacyWarning(BaseModel):
                                   "near_critical_configuration, near_collinear_points, pure_translation, "
                                   "rotation_about_one_axis, orbital_motion, critical_motion, at_range_edge (an "
                                   "interval cut by the intrinsics ranges), no_redundancy (as many residuals as "
-                                  "parameters: the noise not estimated), time_limit (the analysis "
+                                  "parameters: the noise not estimated), few_degrees_of_freedom (the noise "
+                                  "estimated from one degree of freedom: nothing determined), time_limit (the analysis "
                                   "stopped at the job's clock: not analysed), ...")
     detail: str
 
@@ -184,6 +186,9 @@ class Determinacy(BaseModel):
                                      "intervals beside them are estimated from the local curvature either way")
     proven_intervals: ProvenIntervals | None = Field(None, description="intervals proven within cost_increase of "
                                                                        "the optimum (null: none proven)")
+    proven_reason: str | None = Field(None, description="where proven intervals were asked for and "
+                                                         "proven_intervals is null: why (the time limit ran out "
+                                                         "before the proof finished, the stage not certified, ...)")
     proven_over_planes: ProvenOverPlanes | None = Field(
         None, description="the stratified metric stage's intervals proven over every plane at infinity within "
                           "affine_increase of the affine stage's cost, not only the plane stated (absent: none proven)")

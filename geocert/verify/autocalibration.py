@@ -16,7 +16,7 @@ from geocert.formulations.autocalibration import metric_relaxation
 from geocert.formulations.autocalibration import problem as autocalibration_problem
 from geocert.formulations.autocalibration import plane_sublevel, proofs
 from geocert.core.certificates import OBJECTIVE_TOLERANCE
-from geocert.core.determinacy import ESTIMATES_FORM, proven_document
+from geocert.core.determinacy import ESTIMATES_FORM, image_scale, proven_document
 from geocert.core.geometry import InputError, is_number, number_array
 from geocert.core.strict import Invalid, charge, number as _number, numbers as _numbers, same, same_counts
 from geocert.verify import autocalibration_estimates, cost_rounding, estimates, residual_claims, structure_check
@@ -318,9 +318,13 @@ class AutocalibrationVerification(Verification):
         _check_baseline(result.get("baseline"), problem, p)
         _check_proven_intervals(stages[1], claims[1], stages[0])
         estimates.check_plane(stages[0].get("determinacy"), stages[0].get("plane_at_infinity"), "stages/0/determinacy")
-        estimates.check_intrinsics(stages[1].get("determinacy"), result.get("K"), "stages/1/determinacy")
+        estimates.check_intrinsics(stages[1].get("determinacy"), result.get("K"), "stages/1/determinacy",
+                                   image_scale(problem.image_size, problem.ranges["principal_point"]))
         estimates.check_redundancy(stages[0].get("determinacy"), len(cameras) - 4, "stages/0/determinacy")
         estimates.check_redundancy(stages[1].get("determinacy"), 5 * len(cameras) - 10, "stages/1/determinacy")
+        # the affine stage's modulus constraints, and the metric stage's plane (that fit)
+        estimates.check_no_redundancy(stages[0].get("determinacy"), len(cameras) - 4, "stages/0/determinacy")
+        estimates.check_no_redundancy(stages[1].get("determinacy"), len(cameras) - 4, "stages/1/determinacy")
         for number, stage in enumerate(stages[:2]):
             estimates.check_contains(stage.get("determinacy"), f"stages/{number}/determinacy")
             estimates.check_stage_level(stage.get("determinacy"), stage.get("cost"), stage.get("lower_bound"),
@@ -846,12 +850,18 @@ def _check_returned_direct(result: dict, certificate: dict, earlier_estimates: b
             raise Invalid("returned", f"{name} is not what the quadric gives")
     _check_direct_proven(result["stages"][0], claim, len(cameras), per_view=bool(options.get("varying_focal")))
     if result.get("Ks") is None:  # one K
-        estimates.check_intrinsics(result["stages"][0].get("determinacy"), result.get("K"), "stages/0/determinacy")
+        estimates.check_intrinsics(result["stages"][0].get("determinacy"), result.get("K"), "stages/0/determinacy",
+                                   image_scale(problem.image_size, problem.ranges["principal_point"]))
         estimates.check_redundancy(result["stages"][0].get("determinacy"), 5 * len(cameras) - 10,
                                    "stages/0/determinacy")
+        # its plane's share: the modulus constraints (autocalibration.determinacy.metric_stage)
+        estimates.check_no_redundancy(result["stages"][0].get("determinacy"), len(cameras) - 4,
+                                      "stages/0/determinacy")
         _check_direct_level(problem, result, result["stages"][0].get("determinacy"), "stages/0/determinacy")
     else:  # varying focal lengths: an estimate of each view's, of Ks
         estimates.check_focal_lengths(result["stages"][0].get("determinacy"), result["Ks"], "stages/0/determinacy")
+        estimates.check_no_redundancy(result["stages"][0].get("determinacy"),
+                                      5 * (len(cameras) - 1) - (len(cameras) + 3), "stages/0/determinacy")
         _check_direct_level(problem, result, result["stages"][0].get("determinacy"), "stages/0/determinacy")
     estimates.check_contains(result["stages"][0].get("determinacy"), "stages/0/determinacy")
     p = autocalibration_problem.plane_from_input(problem, np.asarray(result["plane_at_infinity"], dtype=float)) \

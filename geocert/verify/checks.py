@@ -24,6 +24,7 @@ from geocert.core.self_check import SelfCheckFailed
 from geocert.core.certificates import (BOUND_TOLERANCE, CLAIM_OPTIONS, FORMAT, OBJECTIVE_TOLERANCE, VERSION,
                                        data_digest, data_hash, problem_hash)
 from geocert.core.geometry import cost_rounding, is_number, norm_cost, residual_lengths
+from geocert.core.determinacy import CURRENT_FORM, ESTIMATES_FORM, FORMS, reading
 from geocert.verify.notes import check_notes
 from geocert.core.strict import (WORK_BASE, WORK_PER_UNIT, Invalid, document_size, nesting_depth,
                                  informational, number as _number, printable_tree, record, same, same_counts,
@@ -362,6 +363,7 @@ def _verify(document: Any, returned: dict | None) -> Report:
     options: dict = {}
     hashed: tuple[str, ...] = ()  # the options the problem hash was found to cover
     earlier_estimates = True  # whether its estimates may be of the earlier form (_check_hashes)
+    estimates_form = CURRENT_FORM  # the estimates' form it is read in (_check_hashes)
     size = 0
     try:
         # A result holding its certificate is walked once: the certificate nests less deeply.
@@ -386,7 +388,7 @@ def _verify(document: Any, returned: dict | None) -> Report:
         _check_option_names(document["kind"], document["options"])
         options = checked_options(document["kind"], document["options"])
         tallies["options"][0] += 1
-        hashed, earlier_form, earlier_estimates = _check_hashes(document, options)
+        hashed, earlier_form, earlier_estimates, estimates_form = _check_hashes(document, options)
         tallies["data_hash"][0] += 1
         _check_item_count(document)
         check_data = hook(_adapter(document["kind"]), "check_data")
@@ -409,7 +411,7 @@ def _verify(document: Any, returned: dict | None) -> Report:
         items = []
     adapter = _adapter(document["kind"]) if items else None
     # The work the document may ask for, in proportion to its size (strict.charge).
-    with work_budget(WORK_PER_UNIT * size + WORK_BASE):
+    with work_budget(WORK_PER_UNIT * size + WORK_BASE), reading(estimates_form):
         _verify_all(document, returned, adapter, options, items, report, tallies, fail, hashed, earlier_estimates)
     report.first_failure = first
     # a result may make a certified claim beyond its items, checked by its kind's check_result
@@ -631,29 +633,36 @@ def _check_claim_members(kind, items: list) -> None:
 
 
 def _problem_form(document: dict, options: dict, names: tuple[str, ...], marks: dict | None, values: bool,
-                  digest) -> tuple[tuple[str, ...], str | None, bool] | None:
+                  digest) -> tuple[tuple[str, ...], str | None, bool, int] | None:
     """_check_hashes' answer where the problem hash is of one of the forms a kind's documents take
-    (with the data hashed as ``values`` says, ``digest`` their text's): today's, one without the
-    kind's mark, an earlier options form; None where it is none of them."""
+    (with the data hashed as ``values`` says, ``digest`` their text's): today's, one of the
+    estimates' earlier marks (determinacy.FORMS), one without the kind's mark, an earlier options
+    form; None where it is none of them."""
     kind, data = document["kind"], document["data"]
     if problem_hash(kind, data, options, names, marks, values, digest) == document["problem_sha256"]:
-        return names, None, not marks
+        return names, None, not marks, CURRENT_FORM
+    if marks == ESTIMATES_FORM:  # the estimates' earlier marked forms, newest first
+        for number in range(CURRENT_FORM - 1, 0, -1):
+            marked = problem_hash(kind, data, options, names, FORMS[number - 1], values, digest)
+            if marked == document["problem_sha256"]:
+                return names, _earlier_mark(FORMS[number - 1]), False, number
     if marks and problem_hash(kind, data, options, names, values=values, digest=digest) \
             == document["problem_sha256"]:
-        return names, _unmarked_form(names, marks), True
+        return names, _unmarked_form(names, marks), True, 0
     # a kind whose hash came to cover more options: its earlier forms, newest first, each with
     # what the report's scope says of it
     for earlier, statement in hook(_adapter(kind), "earlier_forms"):
         if problem_hash(kind, data, options, earlier, values=values, digest=digest) == document["problem_sha256"]:
-            return earlier, statement(options), True
+            return earlier, statement(options), True, 0
     return None
 
 
-def _check_hashes(document: dict, options: dict) -> tuple[tuple[str, ...], str | None, bool]:
+def _check_hashes(document: dict, options: dict) -> tuple[tuple[str, ...], str | None, bool, int]:
     """The data's and the problem's hashes; returns the options the problem hash covers, what
     the report's scope says of a problem hash of a kind's earlier form (None for the current one),
-    and whether the document's determinacy estimates may be of the earlier form (intervals stating
-    no tolerance: a kind that declares no mark, or a hash without the mark its kind declares)."""
+    whether the document's determinacy estimates may be of the earlier form (intervals stating
+    no tolerance: a kind that declares no mark, or a hash without the mark its kind declares), and
+    the number of the estimates' form the document is read in (determinacy.reading: 0 unmarked)."""
     # Today's hashes are of the numbers' values (certificates.hashed_numbers); a document written
     # before hashed them with an integer no float holds kept exact, or, before that, Python's text
     # of them. Each form whose data hash is the document's is tried for the problem hash: where the
@@ -694,6 +703,15 @@ def _unmarked_form(names: tuple[str, ...], marks: dict) -> str:
             "every determinacy interval stated its tolerance, so an estimate whose intervals state none is read as "
             "such a document's, its determined meaning every interval bounded (not within a tenth of its "
             "quantity's scale)")
+
+
+def _earlier_mark(marks: dict) -> str:
+    """What the report's scope says of a document hashed with an earlier mark of the estimates'
+    form (determinacy.FORMS): its estimates are recomputed in that form."""
+    return (f"an earlier form of the estimates ({marks!r}), not today's ({ESTIMATES_FORM!r}): its determinacy "
+            "estimates are read as that form wrote them, their levels SIGMAS squared times the fit's residual "
+            "variance whatever its degrees of freedom (no Student quantile), so an estimate from few residuals "
+            "may be narrower than today's writer would state")
 
 
 # What a result returns of each item, which must equal what its certificate proves (and the

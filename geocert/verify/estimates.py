@@ -29,7 +29,8 @@ from typing import Any
 
 import numpy as np
 
-from geocert.core.determinacy import SIGMAS, Determinacy, certified_gap, cost_increase as level_of, fixes, safely
+from geocert.core.determinacy import (NO_REDUNDANCY_FORM, OWN_SCALE_FORM, Determinacy, certified_gap,
+                                      cost_increase as level_of, fixes, form, level_sigmas, safely)
 from geocert.core.geometry import is_number, normalised_cameras
 from geocert.core.warning_codes import MOTION_CODES
 from geocert.core.strict import Invalid, same
@@ -127,6 +128,10 @@ def check_determined(determinacy: dict, where: str, earlier: bool = True) -> Non
     except (TypeError, KeyError):
         raise Invalid("returned", f"{where}/intervals: each states lower and upper, and lower, upper, value and "
                                   "tolerance are numbers or null") from None
+    reason = determinacy.get("proven_reason")
+    if reason is not None and (not isinstance(reason, str) or determinacy.get("proven_intervals") is not None):
+        raise Invalid("returned", f"{where}/proven_reason is {reason!r:.60}: a reason is a text, stated only where "
+                                  "proven_intervals is null (why nothing was proven)")
     if determinacy.get("determined") is not expected:
         raise Invalid("returned", f"{where}/determined is {determinacy.get('determined')!r:.20}, its intervals and "
                                   f"warnings give {expected!r} (every interval bounded within its tolerance of its "
@@ -153,13 +158,32 @@ def check_redundancy(determinacy: Any, expected: int, where: str) -> None:
                                   f"residuals beyond its parameters number {expected!r}")
 
 
-def check_intrinsics(determinacy: Any, K: Any, where: str) -> None:
+def check_no_redundancy(determinacy: Any, redundancy: int, where: str) -> None:
+    """In a document of today's form (NO_REDUNDANCY_FORM on), an autocalibration stage whose cost
+    has no residual beyond its parameters (``redundancy``, from the number of views, at most 0:
+    the affine stage's modulus constraints of four views, and the metric or direct K stage whose
+    plane is that exact fit) states the ``no_redundancy`` warning, as its writer
+    (autocalibration.determinacy.no_redundancy) does: without it the stage could claim
+    ``determined`` from an exact fit whatever the noise. An analysis stopped or left out claims
+    nothing (stopped). Documents of earlier forms were not required to state it."""
+    if form() < NO_REDUNDANCY_FORM or redundancy > 0 or not isinstance(determinacy, dict) or stopped(determinacy):
+        return
+    warnings = determinacy.get("warnings")
+    codes = [w.get("code") for w in warnings if isinstance(w, dict)] if isinstance(warnings, list) else []
+    if "no_redundancy" not in codes:
+        raise Invalid("returned", f"{where}/warnings state no no_redundancy: the stage's cost has {redundancy} "
+                                  "residuals beyond its parameters (an exact fit whatever the noise), which its writer "
+                                  "warns of")
+
+
+def check_intrinsics(determinacy: Any, K: Any, where: str, side: float | None = None) -> None:
     """An autocalibration K stage's estimate (autocalibration.determinacy.metric_stage) is about
     the K the result returns: its intervals name the five intrinsics in order, each ``value`` the
     returned K's entry (to 1e-8 of the focal length: the writer reads K back through omega), and
-    each ``tolerance`` a tenth of its scale (the focal lengths their own, the others their
-    mean), so that ``determined`` (check_determined) is judged at the writer's width, not one the
-    document chose."""
+    each ``tolerance`` a tenth of its scale (the focal lengths their own; skew and principal point
+    ``side``, core.determinacy.image_scale of the data and ranges, in a document of today's form,
+    and the focal lengths' mean in one of a form before OWN_SCALE_FORM), so that ``determined``
+    (check_determined) is judged at the writer's width, not one the document chose."""
     if not isinstance(determinacy, dict) or stopped(determinacy) or not isinstance(K, list):
         return
     try:
@@ -168,7 +192,8 @@ def check_intrinsics(determinacy: Any, K: Any, where: str) -> None:
         return  # typed by the returned check of K
     values = (K[0, 0], K[1, 1], K[0, 1], K[0, 2], K[1, 2])
     mean = 0.5 * (abs(K[0, 0]) + abs(K[1, 1]))
-    scales = (K[0, 0], K[1, 1], mean, mean, mean)
+    own = side if side is not None and form() >= OWN_SCALE_FORM else mean
+    scales = (K[0, 0], K[1, 1], own, own, own)
     intervals = determinacy.get("intervals")
     if not isinstance(intervals, list) or [i.get("name") if isinstance(i, dict) else None
                                            for i in intervals] != list(INTRINSICS):
@@ -309,7 +334,8 @@ def check_pool(determinacy: Any, where: str) -> None:
 
 def check_stage_level(determinacy: Any, cost: Any, lower_bound: Any, where: str) -> None:
     """A stratified stage's ``cost_increase`` is the writer's level (core.determinacy.
-    cost_increase): SIGMAS^2 times the stage's cost over its redundancy, at least its certified
+    cost_increase): the squared quantile of the document's form (level_sigmas) times the stage's
+    cost over its redundancy, at least its certified
     gap (cost - lower_bound), from figures the document states (the writer's residuals are those
     of the stage's own cost: the modulus cost at the plane, the metric cost at omega). The direct
     stage's estimate is of another cost (its DIAC residuals, not its certified objective), and is
@@ -323,8 +349,9 @@ def check_stage_level(determinacy: Any, cost: Any, lower_bound: Any, where: str)
     expected = level_of(float(cost), redundancy, gap)
     if not _close(determinacy.get("cost_increase"), expected, 0.0, NUMBER_SLACK * abs(expected)):
         raise Invalid("returned", f"{where}/cost_increase is {determinacy.get('cost_increase')!r:.30}; the stage's "
-                                  f"cost {cost!r:.20} over its redundancy {redundancy}, times {SIGMAS:g}^2, at least "
-                                  f"its certified gap, gives {expected!r:.30}")
+                                  f"cost {cost!r:.20} over its redundancy {redundancy}, times "
+                                  f"{level_sigmas(redundancy):.6g}^2 (the document's form's quantile), at least its "
+                                  f"certified gap, gives {expected!r:.30}")
 
 
 def stopped(determinacy: dict) -> bool:

@@ -18,7 +18,7 @@ import pytest
 from geocert.jobs.runner import solve_job
 from geocert.verify.checks import verify_any
 from tests.support import shared_data
-from tests.verify.test_forgeries import rehash, stored
+from tests.verify.test_forgeries import estimates_form, rehash, stored
 from tests.verify.test_forgeries_review5 import WORLD_SHRINK
 from tests.verify.test_forgeries_review6 import far_point_data
 
@@ -75,12 +75,13 @@ def narrowed(result: dict, quantity: int, end: int, fraction: float) -> dict:
     consistent with itself, stating less than its leaves prove."""
     from geocert.verify.autocalibration import proven_metric
 
+    form = estimates_form(result["certificate"])  # the document's own, kept
     forged = copy.deepcopy(result)
     sublevel = forged["certificate"]["items"][1]["proof"]["sublevel"]
     low, high = sublevel["intervals"][quantity]
     sublevel["intervals"][quantity][end] += (1 if end == 0 else -1) * fraction * (high - low)
     forged["stages"][1]["determinacy"]["proven_intervals"] = proven_metric(sublevel)
-    rehash(forged["certificate"])
+    rehash(forged["certificate"], form=form)
     return forged
 
 

@@ -31,17 +31,38 @@ def raw_pack(z: np.ndarray) -> str:
     return base64.b64encode(np.asarray(z, dtype="<f8").tobytes()).decode("ascii")
 
 
-def rehash(document: dict, earlier: bool = False, marked: bool = False) -> dict:
+def estimates_form(document: dict) -> int:
+    """The number of the estimates' form a genuine document's hash declares (core.determinacy.
+    FORMS; 0: unmarked), as the verifier finds it; read before the document is changed, so that
+    what a test restates is written, and hashed, in the document's own form (determinacy.reading,
+    rehash's ``form``)."""
+    from geocert.verify.checks import _check_hashes, checked_options
+
+    return _check_hashes(document, checked_options(document["kind"], document["options"]))[3]
+
+
+def rehash(document: dict, earlier: bool = False, marked: bool = False, form: int | None = None) -> dict:
     """The document's hashes made again, in its kind's current options form (``earlier``: its
     earliest form, as a stored document from before the hash covered more options); ``marked``:
     with the form its kind declares (Verification.hash_marks: the estimates' form), which a
-    stored document's hash lacks."""
+    stored document's hash lacks; ``form``: with that estimates' form's mark (estimates_form; 0:
+    none), for a kind declaring one."""
+    from geocert.core.determinacy import FORMS
     from geocert.kinds import get_kind
 
     verification = get_kind(document["kind"]).verification
     forms = getattr(verification, "earlier_forms", ()) if earlier else ()
     names = forms[-1][0] if forms else getattr(verification, "claim_options", None)
     marks = getattr(verification, "hash_marks", None) if marked else None
+    if form is None and not marked and not earlier:
+        # a document whose data and options are as its hash says keeps its estimates' form (a
+        # changed one cannot be read, and is hashed unmarked, as every stored document is)
+        try:
+            form = estimates_form(document)
+        except Exception:  # noqa: BLE001 (the hashes no longer match: the document was changed)
+            form = None
+    if form is not None and getattr(verification, "hash_marks", None):
+        marks = FORMS[form - 1] if form > 0 else None
     document["data_sha256"] = data_hash(document["kind"], document["data"])
     document["problem_sha256"] = problem_hash(document["kind"], document["data"], document["options"], names, marks)
     return document

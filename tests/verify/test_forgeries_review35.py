@@ -403,9 +403,14 @@ def test_the_near_exact_level_is_the_exact_sum_not_rounding_noise(resection):
         s = [Fraction(v) for v in source] + [Fraction(1)]
         image = [sum(m * v for m, v in zip(row, s)) for row in M]
         exact += sum((Fraction(t) - image[k] / image[2]) ** 2 for k, t in enumerate(target))
+    from geocert.core.determinacy import level_sigmas
+
     level = item["determinacy"]["cost_increase"]
-    assert item["determinacy"]["redundancy"] == 9  # so the level is max(r.r, the gap)
-    assert exact > 0 and abs(level - float(exact)) <= 1e-12 * float(exact)
+    # 9 degrees of freedom: the level is max(t^2 r.r / 9, the gap), t the Student quantile of 9
+    # (3 in the estimates' forms before 2, where the level was r.r itself)
+    assert item["determinacy"]["redundancy"] == 9
+    expected = level_sigmas(9) ** 2 * float(exact) / 9
+    assert exact > 0 and abs(level - expected) <= 1e-12 * expected
     source, target = np.array(data["source"], dtype=float), np.array(data["target"], dtype=float)
     projected = np.hstack([source, np.ones((len(source), 1))]) @ np.array(item["matrix"]).T
     floats = target - projected[:, :2] / projected[:, 2:]

@@ -276,7 +276,10 @@ def test_a_far_map_cost_understated_within_the_least_cost_window_is_refused(far_
 def test_the_understated_far_map_claims_a_quarter_of_its_exact_cost_and_zero_residuals(far_resection):
     """Machine-independent: the exact cost (determinacy.exact_squared_residuals, one float on every
     machine) is over 3 times the understated claim; every exact residual is above 1e-8 px while the
-    forgery states at least half of them 0; its intervals are narrower than the genuine ones."""
+    forgery states at least half of them 0; its intervals are no wider than the genuine ones
+    (narrower in the estimates' forms before 2, where the certified gap over a trivial bound set
+    the genuine level; today's level, the exact residuals' at the Student quantile of 9 degrees of
+    freedom, 1.54 times theirs, exceeds both gaps, and the understated cost does not move it)."""
     from geocert.formulations.fractional import determinacy
 
     forged = _understated(far_resection)
@@ -288,7 +291,7 @@ def test_the_understated_far_map_claims_a_quarter_of_its_exact_cost_and_zero_res
     assert min(abs(r) for r in _exact_residuals(far_resection)) > 1e-8
     assert sum(r == 0 for r in np.ravel(forged["maps"][0]["residuals"])) >= 12
     for narrowed, genuine in zip(_widths(forged), _widths(far_resection)):
-        assert narrowed < 0.9 * genuine
+        assert narrowed <= genuine * (1 + 1e-9)
 
 
 def test_a_far_map_cost_below_the_least_cost_is_refused(far_resection):

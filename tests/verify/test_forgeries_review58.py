@@ -80,7 +80,8 @@ import numpy as np
 import pytest
 
 from geocert.verify.checks import verify_any
-from tests.verify.test_forgeries import refused_naming, rehash, uncertify
+from geocert.core.determinacy import fixes, reading
+from tests.verify.test_forgeries import estimates_form, refused_naming, rehash, uncertify
 
 pytestmark = pytest.mark.filterwarnings("ignore")
 
@@ -124,6 +125,7 @@ def restated_map(result: dict, source: np.ndarray, target: np.ndarray, M: np.nda
     from geocert.verify.fractional import _stated_figure
 
     assert np.abs(source).max() <= COORDINATE_LIMIT and np.abs(target).max() <= COORDINATE_LIMIT
+    form = estimates_form(result["certificate"])  # the document's own, in which it is restated
     result = copy.deepcopy(result)
     result["certificate"]["data"]["maps"][1].update(source=source.tolist(), target=target.tolist())
     claim = result["certificate"]["items"][1]
@@ -136,9 +138,10 @@ def restated_map(result: dict, source: np.ndarray, target: np.ndarray, M: np.nda
     entry.update({name: claim[name] for name in ("matrix", "cost", "lower_bound", "gap", "status", "certified")})
     entry["residuals"] = item.exact_residuals(M).tolist()
     entry.pop("certificate")
-    entry["determinacy"] = json.loads(json.dumps(estimate.map_(source, target, M, claim["cost"], None)))
+    with reading(form):
+        entry["determinacy"] = json.loads(json.dumps(estimate.map_(source, target, M, claim["cost"], None)))
     result["stats"].update(certified=1, statuses={"optimal": 1, "not_certified": 1})
-    rehash(result["certificate"])
+    rehash(result["certificate"], form=form)
     return result
 
 
@@ -158,6 +161,10 @@ def test_a_resection_centre_restated_narrower_in_a_fine_pixel_is_refused(resecti
     widths = [i["upper"] - i["lower"] for i in intervals]
     for found, width in zip(intervals, widths):
         found["lower"], found["upper"] = found["value"] - width / 1000, found["value"] + width / 1000
+    # determined restated as the narrowed intervals give it (the genuine one may be false, its
+    # intervals beyond their tolerance at the Student level), so that only the ends can refuse it
+    forged["maps"][1]["determinacy"]["determined"] = all(fixes(i) for i in intervals) \
+        and not forged["maps"][1]["determinacy"]["warnings"]
     refused_naming(forged, "returned", "maps/1/determinacy/intervals/0/lower")
 
 

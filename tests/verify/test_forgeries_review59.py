@@ -83,7 +83,8 @@ import pytest
 
 from geocert.formulations.fractional.fixed_order import mul
 from geocert.verify.checks import verify_any
-from tests.verify.test_forgeries import STORED, refused_naming, rehash, stored, uncertify
+from geocert.core.determinacy import reading
+from tests.verify.test_forgeries import estimates_form, STORED, refused_naming, rehash, stored, uncertify
 from tests.verify.test_forgeries_review58 import resections, restated_map  # noqa: F401  (resections: the fixture)
 
 pytestmark = pytest.mark.filterwarnings("ignore")
@@ -103,6 +104,7 @@ def _rescaled(result: dict, index: int, world: float, pixels: float) -> dict:
     from geocert.formulations.fractional.items import MapItem
     from geocert.verify.fractional import _stated_figure
 
+    form = estimates_form(result["certificate"])  # the document's own, in which it is restated
     result = copy.deepcopy(result)
     norm = result["certificate"]["options"]["norm"]
     data = result["certificate"]["data"]["maps"][index]
@@ -121,18 +123,26 @@ def _rescaled(result: dict, index: int, world: float, pixels: float) -> dict:
     entry.update({name: claim[name] for name in ("matrix", "cost", "lower_bound", "gap", "status", "certified")})
     entry["residuals"] = item.exact_residuals(M).tolist()
     entry.pop("certificate")
-    entry["determinacy"] = json.loads(json.dumps(estimate.map_(source, target, M, claim["cost"], None)))
+    with reading(form):
+        entry["determinacy"] = json.loads(json.dumps(estimate.map_(source, target, M, claim["cost"], None)))
     certified = len(result["maps"]) - 1
     result["stats"].update(certified=certified, statuses={"optimal": certified, "not_certified": 1})
-    rehash(result["certificate"])
+    rehash(result["certificate"], form=form)
     return result
 
 
 def _collapsed(result: dict, index: int) -> dict:
+    """Every interval of the map collapsed to a thousandth of its width, and ``determined``
+    restated as the collapsed intervals give it (a genuine map's may be false: its intervals
+    beyond their tolerance), so that only the intervals' check can refuse it."""
+    from geocert.core.determinacy import fixes
+
     forged = copy.deepcopy(result)
-    for found in forged["maps"][index]["determinacy"]["intervals"]:
+    determinacy = forged["maps"][index]["determinacy"]
+    for found in determinacy["intervals"]:
         width = found["upper"] - found["lower"]
         found["lower"], found["upper"] = found["value"] - width / 1000, found["value"] + width / 1000
+    determinacy["determined"] = all(fixes(i) for i in determinacy["intervals"]) and not determinacy["warnings"]
     return forged
 
 
@@ -364,6 +374,7 @@ def _homography_moved(world: float, shift: float) -> dict:
     from geocert.verify.fractional import _stated_figure
 
     result = _rescaled(stored("homography3_l2l1"), 1, world, 1.0)
+    form = estimates_form(result["certificate"])  # the stored document's, in which it is restated
     data = result["certificate"]["data"]["maps"][1]
     offset = shift * np.array([1.0, -0.5, 1 / 3])
     source, target = np.array(data["source"]) + offset, np.array(data["target"])
@@ -376,8 +387,9 @@ def _homography_moved(world: float, shift: float) -> dict:
     claim["matrix"], (claim["cost"], _) = M.tolist(), _stated_figure(item, M, "L2L1")
     entry = result["maps"][1]
     entry.update(matrix=claim["matrix"], cost=claim["cost"], residuals=item.exact_residuals(M).tolist())
-    entry["determinacy"] = json.loads(json.dumps(estimate.map_(source, target, M, claim["cost"], None)))
-    rehash(result["certificate"])
+    with reading(form):
+        entry["determinacy"] = json.loads(json.dumps(estimate.map_(source, target, M, claim["cost"], None)))
+    rehash(result["certificate"], form=form)
     return result
 
 
@@ -411,7 +423,8 @@ def _recomputed_widths(result: dict) -> np.ndarray:
     document = json.loads(json.dumps(result))
     source, target = VERIFIED_KINDS[document["kind"]].verification.read(document["certificate"]["data"], 1)
     item = document["maps"][1]
-    own = safely(estimate.map_, source, target, item["matrix"], item["cost"], item.get("lower_bound"))
+    with reading(estimates_form(document["certificate"])):  # as the verifier reads the document
+        own = safely(estimate.map_, source, target, item["matrix"], item["cost"], item.get("lower_bound"))
     return np.array([found["upper"] - found["lower"] for found in own["intervals"]])
 
 

@@ -24,7 +24,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from geocert.core.certificates import data_hash, problem_hash, unpack
+from geocert.core.certificates import unpack
 from geocert.verify.checks import verify_any
 
 STORED = Path(__file__).resolve().parents[1] / "data" / "certificates"
@@ -81,11 +81,11 @@ def _new_value(old: float, how: str, nearby: float) -> float:
 
 
 def _rehash(document: dict) -> None:
-    from geocert.kinds import get_kind
+    """The hashes made again, in the estimates' form the document's hash declares where its data
+    and options are unchanged (test_forgeries.rehash), unmarked otherwise."""
+    from tests.verify.test_forgeries import rehash
 
-    names = getattr(get_kind(document["kind"]).verification, "claim_options", None)
-    document["data_sha256"] = data_hash(document["kind"], document["data"])
-    document["problem_sha256"] = problem_hash(document["kind"], document["data"], document["options"], names)
+    rehash(document)
 
 
 def _at(root, path):

@@ -14,6 +14,7 @@ import random
 import pytest
 
 from geocert.core.certificates import canonical_json, data_digest, data_hash, hashed_numbers, problem_hash
+from geocert.core.determinacy import FORMS
 from geocert.jobs.runner import solve_job
 from geocert.kinds import get_kind
 from geocert.verify.checks import verify_any
@@ -113,7 +114,7 @@ def test_a_document_that_hashed_an_integer_no_float_holds_exactly_still_verifies
     today = certificate["problem_sha256"]
     certificate["data_sha256"] = data_hash(certificate["kind"], certificate["data"], digest=digest)
     names = tuple(name for name in ("norm", "max_residual", "rel_gap", "abs_gap"))
-    for marks in (None, {"determinacy": "every interval states its tolerance"}):
+    for marks in (None, *FORMS):
         rewritten = problem_hash(certificate["kind"], certificate["data"], certificate["options"], names, marks,
                                  digest=digest)
         if problem_hash(certificate["kind"], certificate["data"], certificate["options"], names, marks) == today:

@@ -51,9 +51,9 @@ import numpy as np
 
 from geocert.formulations.autocalibration import frames
 from geocert.formulations.autocalibration import metric_relaxation
-from geocert.core.determinacy import (RELATIVE_WIDTH, SIGMAS, certified_gap, clip, cost_increase,
-                                      curvature_intervals, interval, not_analysed, numeric_jacobian, ranges_at,
-                                      spread, sublevel_rays, tick)
+from geocert.core.determinacy import (OWN_SCALE_FORM, RELATIVE_WIDTH, SIGMAS, certified_gap, clip, cost_increase,
+                                      curvature_intervals, form, image_scale, interval, not_analysed, numeric_jacobian,
+                                      ranges_at, spread, sublevel_rays, tick)
 
 # Radians: rotations given exactly (a metric reconstruction's) carry no noise estimate, and are not
 # taken as known better than 0.6 degrees. Adjusted along a critical family they scatter by that
@@ -520,8 +520,9 @@ def clipped_to_scope(found: dict, lowest: float | None, highest: float | None) -
     """An interval clipped to its scope (core.determinacy.clip) and, where the scope cuts it, what
     the clip hid: its value on (or beyond) a range's end (the optimum pinned there: the data pull
     beyond it), or its end beyond a range's end. A range no wider than the interval's tolerance
-    allows (2 tolerances: the default skew's, 2% of the image side against a tenth of the focal
-    length) fixes its quantity by itself, the user's statement of it rather than a search range:
+    allows (2 tolerances: the default skew's, 2% of the image side against a tenth of half the
+    image's larger side, core.determinacy.image_scale) fixes its quantity by itself, the user's
+    statement of it rather than a search range:
     an end beyond it is not reported, nor a value on its end where the interval spans it all (the
     data then do not prefer one value in it to another; the default skew pinned at its end over a
     general motion)."""
@@ -595,7 +596,11 @@ def metric_walk(problem, p: np.ndarray, w: np.ndarray, gap: float | None) -> dic
     value = _K_of_w(problem, w)
     gradient = numeric_jacobian(lambda x: _K_of_w(problem, x), w)
     f = 0.5 * (abs(value[0]) + abs(value[1]))
-    scales = (value[0], value[1], f, f, f)
+    # skew and principal point: the image's scale in today's form (core.determinacy.image_scale),
+    # the focal length's before
+    own = image_scale(problem.image_size, problem.ranges["principal_point"]) if form() >= OWN_SCALE_FORM else None
+    side = f if own is None else own
+    scales = (value[0], value[1], side, side, side)
     quantities = {name: (float(value[k]), gradient[k], scales[k]) for k, name in enumerate(NAMES)}
     out = curvature_intervals(J, residuals(w), quantities, gap)
     # omega's own uncertainty: the metric cost walked to cost + delta along its ellipsoid.

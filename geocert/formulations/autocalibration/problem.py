@@ -192,6 +192,7 @@ class Problem:
     ranges: dict  # pixels, as solved (defaults filled in)
     K0: np.ndarray
     unit_ranges: dict  # preconditioned
+    image_size: tuple[float, float] | None = None  # data.image_size, when stated
 
 
 def prepare(cameras: np.ndarray, points: np.ndarray | None, image_size, intrinsics: dict,
@@ -208,7 +209,8 @@ def prepare(cameras: np.ndarray, points: np.ndarray | None, image_size, intrinsi
     ranges = resolve_ranges(intrinsics, image_size)
     K0 = preconditioner(ranges)
     norm = frames.normalise(cameras, points, np.linalg.inv(K0), reference, unit_reference, world)
-    return Problem(norm, ranges, K0, normalised_ranges(ranges, K0))
+    return Problem(norm, ranges, K0, normalised_ranges(ranges, K0),
+                   None if image_size is None else (float(image_size[0]), float(image_size[1])))
 
 
 def reference_candidates(cameras: np.ndarray, image_size, intrinsics: dict) -> list[int]:

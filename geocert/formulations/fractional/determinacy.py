@@ -23,8 +23,8 @@ import math
 import numpy as np
 
 from geocert.core.determinacy import (SIGMAS, SINGULAR, Determinacy, certified_gap, curvature_intervals,
-                                               interval, not_analysed, numeric_jacobian, proven_document, safely,
-                                               spread)
+                                      few_degrees, interval, level_sigmas, not_analysed, numeric_jacobian,
+                                      proven_document, safely, spread)
 from geocert.core.exact import exact_centroid_image, exact_squared_residuals  # noqa: F401 (callers read them here)
 from geocert.formulations.fractional import fixed_order
 from geocert.formulations.fractional.normalisation import complement, normalised_map
@@ -101,7 +101,8 @@ def track(cameras: np.ndarray, points: np.ndarray, point: list[float] | None, at
     gap = certified_gap(cost, lower)
     if pooled is not None:  # a floor on delta, as the gap is
         gap = pooled[0] if gap is None else max(gap, pooled[0])
-    out = curvature_intervals(J, residuals(X), quantities, gap)
+    # a pooled level carries its own Student quantile; the track's own variance is then a floor
+    out = curvature_intervals(J, residuals(X), quantities, gap, small_sample=pooled is None)
     if pooled is not None and not math.isfinite(out.cost_increase):
         return no_level()
     out.level = None if pooled is None else pooled_level(pooled)
@@ -292,7 +293,8 @@ def _finite_tracks(cameras, all_centres, tracks: list, X: np.ndarray, costs: np.
     quantity = np.concatenate([X, np.where(has_depth, length, np.nan)[:, None]], axis=1)  # (G, 4)
     cost = (residuals * residuals).sum(axis=1)
     redundancy = 2 * n - 3
-    delta = SIGMAS ** 2 * cost / redundancy if redundancy > 0 else np.zeros(len(X))
+    factor = SIGMAS if pooled is not None else level_sigmas(redundancy)  # as track's: core.determinacy.cost_increase
+    delta = factor ** 2 * cost / redundancy if redundancy > 0 else np.zeros(len(X))
     if pooled is not None:
         delta = np.maximum(delta, pooled[0])
     gaps = np.maximum(costs - lowers, 0.0)  # certified_gap: nan unless both are finite
@@ -311,6 +313,8 @@ def _finite_tracks(cameras, all_centres, tracks: list, X: np.ndarray, costs: np.
             documents.append(no_level())
             continue
         out = Determinacy(cost_increase=float(delta[i]), redundancy=redundancy, level=level)
+        if pooled is None:  # the track's own level, as track's (core.determinacy.information_intervals)
+            out.warnings += few_degrees(redundancy)
         scale = float(length[i]) if has_depth[i] else None
         for k in range(4 if has_depth[i] else 3):
             value = float(quantity[i, k])

@@ -20,7 +20,7 @@ import math
 
 import numpy as np
 
-from geocert.core.determinacy import SINGULAR, Determinacy, certified_gap, cost_increase, interval, spread
+from geocert.core.determinacy import SINGULAR, Determinacy, certified_gap, cost_increase, few_degrees, interval, spread
 from geocert.core.exact import exact_centroid_image, exact_squared_residuals
 from geocert.formulations.fractional.fixed_order import mul, symmetric_eigen
 from geocert.formulations.fractional.normalisation import complement, normalised_map
@@ -58,7 +58,7 @@ def intervals(information_: np.ndarray, squared: float, redundancy: int, quantit
     """core.determinacy.information_intervals in a fixed order (fixed_order.symmetric_eigen, the
     projections summed in order, the half-width's terms by math.fsum)."""
     delta = cost_increase(squared, redundancy, gap)
-    out = Determinacy(cost_increase=delta, redundancy=redundancy)
+    out = Determinacy(cost_increase=delta, redundancy=redundancy, warnings=few_degrees(redundancy))
     if not (np.all(np.isfinite(information_)) and math.isfinite(delta)):
         for name, (value, _, scale) in quantities.items():
             out.intervals.append(interval(name, value, None, None, scale))

@@ -47,12 +47,17 @@ def test_the_fixed_order_intervals_are_lapacks_to_rounding():
 @pytest.mark.parametrize("offset", [0.0, 1e7])
 def test_the_analytic_width_is_the_central_differences_near_the_origin_and_holds_far_off(offset):
     """The interval's width does not depend on where the data lie: 1 px of noise gives about 1.9 px
-    at the origin and 1e7 from it (the earlier central differences drifted 7e-3 of it there)."""
+    at the origin and 1e7 from it at 3 standard errors (the earlier central differences drifted
+    7e-3 of it there); today's form reads it at the Student quantile of its 22 degrees of freedom
+    (3.380 for 3), 2.15 px."""
+    from geocert.core.determinacy import level_sigmas
     from geocert.jobs.runner import solve_job
 
     result = solve_job(_far_homography(offset, 1.0, 5))
-    interval = result["maps"][0]["determinacy"]["intervals"][0]
-    assert math.isclose(interval["upper"] - interval["lower"], 1.9107698, rel_tol=1e-6)
+    determinacy = result["maps"][0]["determinacy"]
+    interval = determinacy["intervals"][0]
+    assert determinacy["redundancy"] == 22
+    assert math.isclose(interval["upper"] - interval["lower"], 1.9107698 * level_sigmas(22) / 3.0, rel_tol=1e-6)
 
 
 @pytest.fixture(scope="module")

@@ -250,12 +250,22 @@ class TestKindOnRealCameras:
         metric = result["stages"][1]["determinacy"]
         assert metric["warnings"] and not metric["determined"], name
 
-    def test_views_over_a_hemisphere_are_determined_and_hold_the_truth(self):
+    def test_views_over_a_hemisphere_fix_the_plane_and_focal_lengths_and_hold_the_truth(self):
+        """A general motion: the affine stage is determined, and the metric stage's focal lengths
+        are fixed (within a tenth of their value). Its principal point is not fixed within its
+        own tolerance, a tenth of half the image's larger side (32 px on 640 x 480: intervals
+        some 260 and 190 px wide, cut by the range), so the stage is not determined (issue 37
+        F4: at a tenth of the focal length, 331 px, it had counted as fixed). Every interval
+        holds the truth."""
         views, result = autocalibrated("hemisphere")
-        for stage in result["stages"]:
-            assert stage["determinacy"]["determined"], stage["determinacy"]
-        for found in result["stages"][1]["determinacy"]["intervals"]:
-            assert found["lower"] <= truth(views)[found["name"]] <= found["upper"], found
+        assert result["stages"][0]["determinacy"]["determined"], result["stages"][0]["determinacy"]
+        metric = result["stages"][1]["determinacy"]
+        found = {i["name"]: i for i in metric["intervals"]}
+        assert fixes(found["focal_x"]) and fixes(found["focal_y"])
+        assert found["principal_u"]["tolerance"] == found["principal_v"]["tolerance"] == 32.0
+        assert not (fixes(found["principal_u"]) and fixes(found["principal_v"])) and not metric["determined"]
+        for each in metric["intervals"]:
+            assert each["lower"] <= truth(views)[each["name"]] <= each["upper"], each
 
     @pytest.mark.parametrize("name", ["temple", "hemisphere", "sparse ring", "temple sparse ring", "corridor", "house"])
     def test_an_interval_that_fixes_its_quantity_holds_the_truth_and_the_scope(self, name):
