@@ -60,6 +60,7 @@ STUDENT_FORM = 2  # the first form whose levels use the Student quantile
 
 OWN_SCALE_FORM = 2  # the first form giving a principal point and skew a scale of their own (image_scale)
 NO_REDUNDANCY_FORM = 2  # the first form whose verifier requires no_redundancy where a stage has none
+RANGE_EDGE_FORM = 2  # the first form whose verifier requires at_range_edge where the scope cuts an interval
 
 # The form estimates are computed in: today's for a writer; a verifier reading a document of an
 # earlier form recomputes its estimates in that form (``reading``).

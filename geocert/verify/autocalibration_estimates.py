@@ -34,7 +34,7 @@ import numpy as np
 from geocert.formulations.autocalibration import determinacy as writer
 from geocert.formulations.autocalibration import metric_relaxation
 from geocert.formulations.autocalibration.problem import w_of_K
-from geocert.core.determinacy import certified_gap, clip, safely
+from geocert.core.determinacy import RANGE_EDGE_FORM, certified_gap, clip, form, safely
 from geocert.core.strict import Invalid
 from geocert.verify import estimates
 
@@ -118,6 +118,7 @@ def _check_K_stage(problem, p: np.ndarray, w: np.ndarray, gap: float | None, sta
         if found is not None:
             _check_holds(stated, found["intervals"], where)
             _check_plane_motion(stated, found["family"], where)
+            _check_range_edge(stated, found, where)
         return
     walk = _walked(writer.metric_walk, problem, p, w, gap)
     if walk is not None:
@@ -139,6 +140,50 @@ def _check_plane_motion(stated: dict, family: dict | None, where: str) -> None:
         raise Invalid("returned", f"{where}/warnings state no critical motion; the planes at infinity the modulus "
                                   f"cost cannot tell from the returned one, walked again, move K by "
                                   f"{family['largest_move']:.3g} of its focal length")
+
+
+def _check_range_edge(stated: dict, found: dict, where: str) -> None:
+    """In today's form (RANGE_EDGE_FORM on), where the scope cuts a K interval the stage states
+    ``at_range_edge`` (determinacy.clipped_to_scope, range_edge): without it a K pinned on its
+    range's end, or an interval the range cut short, reads as fixed by the data (review 62: f =
+    984.8 in [929.6, 990] under the range [300, 990], the truth 1000, restated determined). Only a
+    cut that holds beyond the walk's slack is required: each interval's ends moved in by it (and,
+    for a range no wider than the tolerance allows, out by it before asking whether the interval
+    spans the range), its value within half the writer's EDGE of the end; a cut the writer's
+    rounding may not have seen is left to its word."""
+    if form() < RANGE_EDGE_FORM:
+        return
+    warnings = stated.get("warnings")
+    if isinstance(warnings, list) and "at_range_edge" in [w.get("code") for w in warnings if isinstance(w, dict)]:
+        return
+    for found, (lowest, highest) in zip(found["unclipped"], found["scope"]):
+        if _surely_cut(found, lowest, highest):
+            raise Invalid("returned", f"{where}/warnings state no at_range_edge: the intrinsics ranges cut the "
+                                      f"interval of {found['name']} (value {found['value']:.6g}, range "
+                                      f"[{lowest}, {highest}]), made again")
+
+
+def _surely_cut(found: dict, lowest: float | None, highest: float | None) -> bool:
+    """Whether determinacy.clipped_to_scope cuts ``found`` (unclipped) however the writer's
+    rounding went (_check_range_edge)."""
+    value, tolerance = found["value"], found.get("tolerance")
+    if value is None or not math.isfinite(value):
+        return False
+    lo, hi = found["lower"], found["upper"]
+    width = hi - lo if lo is not None and hi is not None and math.isfinite(hi - lo) else 0.0
+    slack = WALK_SLACK * width + estimates.VALUE_SLACK * max(abs(value), 1.0)
+    narrow = (lowest is not None and highest is not None and tolerance is not None
+              and highest - lowest <= 2.0 * tolerance * (1.0 + WALK_SLACK))  # maybe narrow: maybe spanned
+    spans = narrow and (lo is None or lo - slack <= lowest) and (hi is None or hi + slack >= highest)
+    for end, edge, sign in (("lower", lowest, -1.0), ("upper", highest, 1.0)):
+        if edge is None or not math.isfinite(edge):
+            continue
+        if not spans and sign * (value - edge) >= -0.5 * writer.EDGE * max(abs(edge), 1.0):
+            return True
+        reach = found[end]
+        if not narrow and reach is not None and sign * (reach - edge) > slack:
+            return True
+    return False
 
 
 def _nearer(walk: dict, problem) -> list[dict]:

@@ -635,10 +635,11 @@ def metric_intervals(problem, p: np.ndarray, w: np.ndarray, gap: float | None, d
     lo_p, hi_p = ranges_at(value, family["Ks"])
     lower_end = value - np.hypot(value - walk["lower"], value - lo_p)
     upper_end = value + np.hypot(walk["upper"] - value, hi_p - value)
-    clipped = [clipped_to_scope(interval(name, value[k], lower_end[k], upper_end[k], scales[k]), *bounds)
-               for k, (name, bounds) in enumerate(zip(NAMES, (direct_scope_of if direct else scope_of)(problem)))]
+    unclipped = [interval(name, value[k], lower_end[k], upper_end[k], scales[k]) for k, name in enumerate(NAMES)]
+    scope = (direct_scope_of if direct else scope_of)(problem)
+    clipped = [clipped_to_scope(dict(found), *bounds) for found, bounds in zip(unclipped, scope)]
     return {"walk": walk, "family": family, "intervals": [found for found, _ in clipped],
-            "cut": [cut for _, cut in clipped]}
+            "cut": [cut for _, cut in clipped], "unclipped": unclipped, "scope": scope}
 
 
 def metric_stage(problem, p: np.ndarray, K_pixels: np.ndarray, cost: float | None, lower: float | None,
