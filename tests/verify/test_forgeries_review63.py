@@ -44,7 +44,7 @@ run on the JSON text):
   scope, a combination of the ranges) with no at_range_edge and determined, its interval wholly
   beyond 990: the report's scope states the combination (not counted); direct_scope_of's boxes
   (|each| <= f0 sqrt(2 high)) are looser than the combination, so they cut nothing here; with
-  [300, 700] the solve fails (nothing certified).
+  [300, 700] or [300, 900] the solve fails (nothing certified).
 - World units (the triangulation and review 58's resection solved in units of 1e-300, 1e-162 and
   1e8 m): the solution moved up to 1% an entry, the cost lowered a tenth, the bound raised a
   fifth above the cost, the gap stated 0 with the bound at the cost: 24 of 24 refused.
