@@ -373,9 +373,16 @@ def _check_tracks(kind, result: dict, certificate: dict, earlier: bool = True) -
     cameras = normalised_cameras(data["cameras"])  # as the writer reads them: raw, entries near 2^1023 overflow
     for index, item in enumerate(result.get("tracks") or []):
         determinacy = item.get("determinacy") if isinstance(item, dict) else None
-        if not isinstance(determinacy, dict) or stopped(determinacy):
+        if not isinstance(determinacy, dict):
             continue
         where = f"tracks/{index}/determinacy"
+        if stopped(determinacy):
+            # a time_limit no writer of tracks states and the verifier cannot judge; a not_analysed
+            # is no_level's, which says the residuals at the point returned are not finite
+            if determinacy["warnings"][0].get("code") == "not_analysed":
+                views = data["tracks"][index]["views"]
+                _check_no_level(where, item, cameras[views], np.asarray(data["tracks"][index]["points"], dtype=float))
+            continue
         if item.get("point") is None:
             raise Invalid("returned", f"{where} is stated for a track returning no point (its writer states none)")
         views = data["tracks"][index]["views"]
@@ -392,6 +399,53 @@ def _check_tracks(kind, result: dict, certificate: dict, earlier: bool = True) -
         # value 1e6 off the origin is 1e-3 px, thousands of widths, so the x, y and z intervals
         # collapsed onto their values, or moved with them off the returned point, verified
         _compare(where, determinacy, expected, earlier, width_slack=TRACK_WIDTH_SLACK, offsets=True, pooled=True)
+
+
+# A projection's depth this close to 0, relative to the sum of its terms' sizes, another order of
+# the same sum (the writer's batched einsum, the verifier's matmul) may round to 0 or not: the
+# residuals are then finite for one and not for the other, and a no_level track is not judged.
+DEPTH_ROUNDING = 1e-8
+# Of the largest float: a level or squared residual below this is finite under any rounding of
+# the same sums (a few ulps), where the writer's own may overflow only far above it.
+LEVEL_ROOM = 1e-6
+
+
+def _check_no_level(where: str, item: dict, cameras: np.ndarray, points: np.ndarray) -> None:
+    """A track stated not analysed (fractional.determinacy.no_level: "its residuals at the point
+    returned are not finite") claims nothing, so the reason must hold: its writer states it only
+    where the track's level at the returned point (tracks_many's and track's delta: 3^2 times the
+    squared residuals over 2n - 3, at least the pooled level and the certified gap) is not finite.
+    Refused where the residuals at the point returned, their squares and that level are surely
+    finite (every depth off 0 beyond its rounding, each well inside float range): the track's
+    intervals hidden behind a false reason (review 63 class 3). A point at infinity's writer
+    states at_infinity, and no point at all no determinacy: neither states this."""
+    point = item.get("point")
+    if point is None or item.get("at_infinity") is True:
+        raise Invalid("returned", f"{where} is stated not analysed for a track returning "
+                                  f"{'no point' if point is None else 'a point at infinity'} (its writer states "
+                                  f"{'none' if point is None else 'at_infinity'})")
+    try:
+        X = np.append(np.asarray(point, dtype=float), 1.0)
+        with np.errstate(all="ignore"):
+            proj = cameras @ X
+            reach = np.abs(cameras[:, 2, :]) @ np.abs(X)
+            if not (np.all(np.isfinite(proj)) and np.all(np.abs(proj[:, 2]) > DEPTH_ROUNDING * reach)):
+                return  # a depth at 0 (a point on a camera's centre) or one rounding may make 0: not judged
+            residuals = (proj[:, :2] / proj[:, 2:3] - points).ravel()
+            squares = residuals * residuals
+            cost = float(squares.sum())
+    except (TypeError, ValueError):
+        return  # (typed by the returned check)
+    redundancy = 2 * len(points) - 3
+    level = estimate.SIGMAS ** 2 * cost / redundancy if redundancy > 0 else 0.0
+    stated = item.get("cost"), item.get("lower_bound")
+    gap = certified_gap(float(stated[0]), float(stated[1])) if all(is_number(v) for v in stated) else None
+    room = LEVEL_ROOM * float(np.finfo(float).max)
+    if np.all(np.isfinite(squares)) and float(squares.max(initial=0.0)) < room and math.isfinite(level) \
+            and level < room and (gap is None or gap < room):
+        raise Invalid("returned", f"{where} is stated not analysed, its residuals at the point returned not finite; "
+                                  f"they are finite (their squares sum to {cost:.6g}, its level {level:.6g}): its "
+                                  "writer analyses such a track and states its intervals")
 
 
 def _check_point_values(where: str, determinacy: dict, point: Any) -> None:
@@ -414,9 +468,13 @@ def _check_maps(kind, result: dict, certificate: dict, earlier: bool = True) -> 
     read = kind.verification.read
     for index, item in enumerate(result.get("maps") or []):
         determinacy = item.get("determinacy") if isinstance(item, dict) else None
+        where = f"maps/{index}/determinacy"
+        if isinstance(determinacy, dict) and stopped(determinacy) and determinacy["warnings"][0].get("code") == \
+                "not_analysed":  # a time_limit is not judged (no writer of maps states one either)
+            raise Invalid("returned", f"{where} is stated not analysed: no writer of a map's estimate states that "
+                                      "(map_ states its intervals, or none where the data defeat it)")
         if not isinstance(determinacy, dict) or stopped(determinacy):
             continue
-        where = f"maps/{index}/determinacy"
         if item.get("matrix") is None:
             raise Invalid("returned", f"{where} is stated for a map returning no matrix (its writer states none)")
         source, target = read(certificate["data"], index)

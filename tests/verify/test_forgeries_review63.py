@@ -180,7 +180,6 @@ def _triangulation_today() -> dict:
     return json.loads(json.dumps(solve_job(job)))
 
 
-@pytest.mark.xfail(strict=True, reason="review 63 class 3: not_analysed is not checked against the residuals")
 def test_an_analysable_track_stated_not_analysed_is_refused():
     """The example solved today (today's form): its widest track's determinacy replaced by
     no_level's (its residuals said not finite, its intervals gone) verifies."""
