@@ -31,6 +31,7 @@ import numpy as np
 
 from geocert.core.determinacy import (NO_REDUNDANCY_FORM, OWN_SCALE_FORM, Determinacy, certified_gap,
                                       cost_increase as level_of, fixes, form, level_sigmas, safely)
+from geocert.core import proven_reasons
 from geocert.core.geometry import is_number, normalised_cameras
 from geocert.core.warning_codes import MOTION_CODES
 from geocert.core.strict import Invalid, same
@@ -129,9 +130,9 @@ def check_determined(determinacy: dict, where: str, earlier: bool = True) -> Non
         raise Invalid("returned", f"{where}/intervals: each states lower and upper, and lower, upper, value and "
                                   "tolerance are numbers or null") from None
     reason = determinacy.get("proven_reason")
-    if reason is not None and (not isinstance(reason, str) or determinacy.get("proven_intervals") is not None):
-        raise Invalid("returned", f"{where}/proven_reason is {reason!r:.60}: a reason is a text, stated only where "
-                                  "proven_intervals is null (why nothing was proven)")
+    if reason is not None:  # an autocalibration stage's, checked (check_proven_reason) and removed before this
+        raise Invalid("returned", f"{where}/proven_reason is {reason!r:.60}: its writer states a reason only for an "
+                                  "autocalibration stage whose proven intervals the options asked for")
     if determinacy.get("determined") is not expected:
         raise Invalid("returned", f"{where}/determined is {determinacy.get('determined')!r:.20}, its intervals and "
                                   f"warnings give {expected!r} (every interval bounded within its tolerance of its "
@@ -140,6 +141,39 @@ def check_determined(determinacy: dict, where: str, earlier: bool = True) -> Non
         lower, upper = found.get("lower"), found.get("upper")
         if lower is not None and upper is not None and not lower <= upper:
             raise Invalid("returned", f"{where}/intervals/{number}: lower {lower!r:.30} above upper {upper!r:.30}")
+
+
+def check_proven_reason(determinacy: Any, where: str, asked: bool, keys: tuple[str, ...], full: bool,
+                        proved: bool, status: Any) -> None:
+    """A stage's ``proven_reason`` (why its proven intervals, asked for, are null) is its writer's:
+    stated only where the options asked for a proof (``asked``: the stratified metric stage's with a
+    full certificate, kinds.autocalibration; the direct stage's with prove_focal_interval or
+    prove_intrinsics_intervals), beside a null proven_intervals, in one of the writer's forms of
+    words (core.proven_reasons, ``keys`` the stage's): where the certificate is not full, or the
+    stage has no proof (``proved``: certified with a proof), exactly the one
+    autocalibration_stages.unproven gives (the stage's own status); else one of the proof's own.
+    A text reading as a proof ("proven: every intrinsic within 0.01%") is refused (review 63
+    class 2). A reason left out is not required (documents written before it was stated)."""
+    reason = determinacy.get("proven_reason") if isinstance(determinacy, dict) else None
+    if reason is None:
+        return
+    if not asked:
+        raise Invalid("returned", f"{where}/proven_reason is {reason!r:.60}: the options asked for no proven "
+                                  "interval, so its writer states no reason why none was proven")
+    if not isinstance(reason, str) or determinacy.get("proven_intervals") is not None:
+        raise Invalid("returned", f"{where}/proven_reason is {reason!r:.60}: a reason is a text, stated only where "
+                                  "proven_intervals is null (why nothing was proven)")
+    if not full:
+        expected = (proven_reasons.reason("not_full"),)
+    elif not proved:
+        expected = (proven_reasons.reason("not_certified", status=status),) if isinstance(status, str) else ()
+    else:
+        expected = None
+    if expected is not None and reason not in expected or expected is None and proven_reasons.is_reason(
+            reason, tuple(k for k in keys if k not in ("not_full", "not_certified"))) is None:
+        raise Invalid("returned", f"{where}/proven_reason is {reason!r:.80}: not its writer's reason for this stage "
+                                  "(core.proven_reasons: a full certificate's certified stage states why its proof "
+                                  "found nothing; any other stage, why there is no proof to read)")
 
 
 INTRINSICS = ("focal_x", "focal_y", "skew", "principal_u", "principal_v")  # autocalibration.determinacy.NAMES
