@@ -14,6 +14,7 @@ from typing import Annotated, Any, Literal
 import numpy as np
 from pydantic import BaseModel, Field
 
+from geocert.core import proven_reasons
 from geocert.kinds.base import ProblemKind
 from geocert.kinds.autocalibration_stages import ANALYSIS_GRACE_S, self_check_stages, stage_document, unproven
 from geocert.kinds.documents import finite_or_none
@@ -342,15 +343,13 @@ def _prove_intervals(problem: autocalibration_problem.Problem, result, stage: di
     document = stage["determinacy"]
     increase = document.get("cost_increase")
     if increase is None or stage["cost"] is None:
-        return "the stage states no cost or no cost increase to prove intervals at (its analysis did not finish)"
+        return proven_reasons.reason("metric_no_level")
     try:
         found = metric_sublevel.prove(problem, result.p, result.metric.unit, stage["cost"], increase, time_limit_s)
     except (ValueError, ArithmeticError, np.linalg.LinAlgError) as exc:
-        return f"the proof of K's intervals failed ({type(exc).__name__}: {str(exc)[:200]})"
+        return proven_reasons.reason("metric_failed", error=proven_reasons.error_name(exc))
     if found is None:
-        return (f"the search for K's intervals proved none within its {time_limit_s:.3g} s (the least of the job's "
-                "time limit, 20 s and the time left): no finite level, a tightening that failed, or a proof its own "
-                "check refused")
+        return proven_reasons.reason("metric_none", seconds=time_limit_s)
     proof["sublevel"] = found
     document["proven_intervals"] = proven_metric(proof["sublevel"])
     document["proven"] = True
@@ -467,8 +466,7 @@ def stratified_item(parsed: Parsed, options: autocalibration_problem.Autocalibra
         why_not = unproven(full, metric_stage["certified"], proof, metric_stage["status"]) if prove_intervals else None
         if prove_intervals and why_not is None and metric_stage["determinacy"] is not None:
             left = math.inf if deadline is None else deadline - time.monotonic()
-            why_not = ("the job's time limit (options.time_limit_s) had passed before the proof of K's intervals could "
-                       "start: the solve and its determinacy took it") if left <= 0 else \
+            why_not = proven_reasons.reason("metric_late") if left <= 0 else \
                 _prove_intervals(problem, result, metric_stage, proof, min(options.time_limit_s, 20.0, left))
             # the planes' regions are proved side by side whether or not the affine search finished
             left = math.inf if deadline is None else deadline - time.monotonic()

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import dataclasses
 
+from geocert.core import proven_reasons
 from geocert.kinds.documents import finite_or_none
 from geocert.formulations.autocalibration import problem
 from geocert.core.strict import Invalid
@@ -24,10 +25,9 @@ def unproven(full: bool, certified: bool, proof: dict | None, status: str) -> st
     """Why a stage's intervals asked to be proven cannot be (None: they may be): a proof is read
     off a full certificate of a certified stage."""
     if not full:
-        return ("proven intervals are read off the proof's duals, which only a full certificate carries: ask "
-                "certificate 'full'")
+        return proven_reasons.reason("not_full")
     if not certified or proof is None:
-        return f"the stage is not certified (status {status}): there is no proof to read intervals from"
+        return proven_reasons.reason("not_certified", status=status)
     return None
 
 

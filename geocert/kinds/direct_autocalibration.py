@@ -10,6 +10,7 @@ import time
 
 import numpy as np
 
+from geocert.core import proven_reasons
 from geocert.kinds.autocalibration_stages import ANALYSIS_GRACE_S, self_check_stages, stage_document, unproven
 from geocert.formulations.autocalibration import direct
 from geocert.formulations.autocalibration import direct_relaxation
@@ -140,22 +141,19 @@ def _prove_focal(setup: direct.DirectSetup, result, stage: dict, proof: dict, de
             raise direct_solve.Stopped("time_limit", "the job's deadline")
 
     prove = direct_solve.prove_focal_lengths if varying_focal else direct_solve.prove_focal
-    what = "each view's focal length" if varying_focal else "the focal length"
-    after = " (the other intrinsics' proofs, asked for, come after it and were not started)" if intrinsics else ""
+    what = proven_reasons.WHAT[1] if varying_focal else proven_reasons.WHAT[0]
+    after = proven_reasons.AFTER[1] if intrinsics else proven_reasons.AFTER[0]
     started = time.monotonic()
     if started > deadline:
-        return (f"the job's time limit (options.time_limit_s) had passed before the proof of {what}'s interval "
-                f"could start: the solve and its determinacy took it{after}")
+        return proven_reasons.reason("direct_late", what=what, after=after)
     try:
         found = prove(setup, result.Q, stage["cost"], increase, check)
     except direct_solve.Stopped:
-        return (f"the job's time limit (options.time_limit_s) ran out {time.monotonic() - started:.3g} s into the "
-                f"proof of {what}'s interval, before it finished: nothing was proven{after}")
+        return proven_reasons.reason("direct_stopped", seconds=time.monotonic() - started, what=what, after=after)
     except (ValueError, ArithmeticError, np.linalg.LinAlgError) as exc:
-        return f"the proof of {what}'s interval failed ({type(exc).__name__}: {str(exc)[:200]}){after}"
+        return proven_reasons.reason("direct_failed", error=proven_reasons.error_name(exc), what=what, after=after)
     if found is None:
-        return (f"no dual of {what}'s interval programs proved an end (their solves stalled, or no safe bound "
-                f"was above 0){after}")
+        return proven_reasons.reason("direct_none", what=what, after=after)
     if intrinsics:
         found["intrinsics"] = direct_solve.prove_intrinsics(setup, result.Q, stage["cost"], increase, check)
     proof["sublevel"] = found

@@ -15,6 +15,7 @@ import numpy as np
 from geocert.formulations.autocalibration import metric_relaxation
 from geocert.formulations.autocalibration import problem as autocalibration_problem
 from geocert.formulations.autocalibration import plane_sublevel, proofs
+from geocert.core import proven_reasons
 from geocert.core.certificates import OBJECTIVE_TOLERANCE
 from geocert.core.determinacy import ESTIMATES_FORM, image_scale, proven_document
 from geocert.core.geometry import InputError, is_number, number_array
@@ -274,6 +275,15 @@ class AutocalibrationVerification(Verification):
         for index, (stage, claim) in enumerate(zip(stages, claims)):
             # every stage's estimate, analysed or stopped, certified or not, in its writer's words
             estimates.check_stage_words(stage.get("determinacy"), f"stages/{index}/determinacy")
+            # why proven intervals asked for are null: the stage the writer proves (the metric or
+            # the direct one), when the options asked, in its words (removed by estimates_of)
+            options = certificate["options"]
+            asked = (bool(options.get("prove_focal_interval") or options.get("prove_intrinsics_intervals")) if direct
+                     else options.get("certificate") == "full") and names[index] in ("metric", "direct")
+            estimates.check_proven_reason(
+                stage.get("determinacy"), f"stages/{index}/determinacy", asked,
+                proven_reasons.DIRECT if direct else proven_reasons.STRATIFIED, options.get("certificate") == "full",
+                claim.get("certified") is True and isinstance(claim.get("proof"), dict), stage.get("status"))
             summary = stage.get("certificate")
             if claim.get("certified") is True and isinstance(summary, dict) and "scope" in summary \
                     and summary["scope"] != STAGE_SCOPES[names[index]]:
@@ -337,6 +347,11 @@ class AutocalibrationVerification(Verification):
         """What of the result must be estimates only (verify._check_estimates): all of it but the
         metric stage's proven intervals, which check_returned has checked against its proof."""
         stages = result.get("stages")
+        if isinstance(stages, list):  # each stage's proven_reason: checked by check_returned (check_proven_reason)
+            stages = [{**stage, "determinacy": {k: v for k, v in stage["determinacy"].items() if k != "proven_reason"}}
+                      if isinstance(stage, dict) and isinstance(stage.get("determinacy"), dict) else stage
+                      for stage in stages]
+            result = {**result, "stages": stages}
         if certificate.get("options", {}).get("method") == "direct":  # its one stage's interval (direct_sublevel)
             proof = (certificate["items"][0].get("proof") if len(certificate.get("items") or []) == 1
                      and isinstance(certificate["items"][0], dict) and certificate["items"][0].get("certified") is True

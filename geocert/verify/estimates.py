@@ -31,6 +31,7 @@ import numpy as np
 
 from geocert.core.determinacy import (NO_REDUNDANCY_FORM, OWN_SCALE_FORM, Determinacy, certified_gap,
                                       cost_increase as level_of, fixes, form, level_sigmas, safely)
+from geocert.core import proven_reasons
 from geocert.core.geometry import is_number, normalised_cameras
 from geocert.core.warning_codes import MOTION_CODES
 from geocert.core.strict import Invalid, same
@@ -129,9 +130,9 @@ def check_determined(determinacy: dict, where: str, earlier: bool = True) -> Non
         raise Invalid("returned", f"{where}/intervals: each states lower and upper, and lower, upper, value and "
                                   "tolerance are numbers or null") from None
     reason = determinacy.get("proven_reason")
-    if reason is not None and (not isinstance(reason, str) or determinacy.get("proven_intervals") is not None):
-        raise Invalid("returned", f"{where}/proven_reason is {reason!r:.60}: a reason is a text, stated only where "
-                                  "proven_intervals is null (why nothing was proven)")
+    if reason is not None:  # an autocalibration stage's, checked (check_proven_reason) and removed before this
+        raise Invalid("returned", f"{where}/proven_reason is {reason!r:.60}: its writer states a reason only for an "
+                                  "autocalibration stage whose proven intervals the options asked for")
     if determinacy.get("determined") is not expected:
         raise Invalid("returned", f"{where}/determined is {determinacy.get('determined')!r:.20}, its intervals and "
                                   f"warnings give {expected!r} (every interval bounded within its tolerance of its "
@@ -140,6 +141,39 @@ def check_determined(determinacy: dict, where: str, earlier: bool = True) -> Non
         lower, upper = found.get("lower"), found.get("upper")
         if lower is not None and upper is not None and not lower <= upper:
             raise Invalid("returned", f"{where}/intervals/{number}: lower {lower!r:.30} above upper {upper!r:.30}")
+
+
+def check_proven_reason(determinacy: Any, where: str, asked: bool, keys: tuple[str, ...], full: bool,
+                        proved: bool, status: Any) -> None:
+    """A stage's ``proven_reason`` (why its proven intervals, asked for, are null) is its writer's:
+    stated only where the options asked for a proof (``asked``: the stratified metric stage's with a
+    full certificate, kinds.autocalibration; the direct stage's with prove_focal_interval or
+    prove_intrinsics_intervals), beside a null proven_intervals, in one of the writer's forms of
+    words (core.proven_reasons, ``keys`` the stage's): where the certificate is not full, or the
+    stage has no proof (``proved``: certified with a proof), exactly the one
+    autocalibration_stages.unproven gives (the stage's own status); else one of the proof's own.
+    A text reading as a proof ("proven: every intrinsic within 0.01%") is refused (review 63
+    class 2). A reason left out is not required (documents written before it was stated)."""
+    reason = determinacy.get("proven_reason") if isinstance(determinacy, dict) else None
+    if reason is None:
+        return
+    if not asked:
+        raise Invalid("returned", f"{where}/proven_reason is {reason!r:.60}: the options asked for no proven "
+                                  "interval, so its writer states no reason why none was proven")
+    if not isinstance(reason, str) or determinacy.get("proven_intervals") is not None:
+        raise Invalid("returned", f"{where}/proven_reason is {reason!r:.60}: a reason is a text, stated only where "
+                                  "proven_intervals is null (why nothing was proven)")
+    if not full:
+        expected = (proven_reasons.reason("not_full"),)
+    elif not proved:
+        expected = (proven_reasons.reason("not_certified", status=status),) if isinstance(status, str) else ()
+    else:
+        expected = None
+    if expected is not None and reason not in expected or expected is None and proven_reasons.is_reason(
+            reason, tuple(k for k in keys if k not in ("not_full", "not_certified"))) is None:
+        raise Invalid("returned", f"{where}/proven_reason is {reason!r:.80}: not its writer's reason for this stage "
+                                  "(core.proven_reasons: a full certificate's certified stage states why its proof "
+                                  "found nothing; any other stage, why there is no proof to read)")
 
 
 INTRINSICS = ("focal_x", "focal_y", "skew", "principal_u", "principal_v")  # autocalibration.determinacy.NAMES
@@ -373,9 +407,16 @@ def _check_tracks(kind, result: dict, certificate: dict, earlier: bool = True) -
     cameras = normalised_cameras(data["cameras"])  # as the writer reads them: raw, entries near 2^1023 overflow
     for index, item in enumerate(result.get("tracks") or []):
         determinacy = item.get("determinacy") if isinstance(item, dict) else None
-        if not isinstance(determinacy, dict) or stopped(determinacy):
+        if not isinstance(determinacy, dict):
             continue
         where = f"tracks/{index}/determinacy"
+        if stopped(determinacy):
+            # a time_limit no writer of tracks states and the verifier cannot judge; a not_analysed
+            # is no_level's, which says the residuals at the point returned are not finite
+            if determinacy["warnings"][0].get("code") == "not_analysed":
+                views = data["tracks"][index]["views"]
+                _check_no_level(where, item, cameras[views], np.asarray(data["tracks"][index]["points"], dtype=float))
+            continue
         if item.get("point") is None:
             raise Invalid("returned", f"{where} is stated for a track returning no point (its writer states none)")
         views = data["tracks"][index]["views"]
@@ -392,6 +433,53 @@ def _check_tracks(kind, result: dict, certificate: dict, earlier: bool = True) -
         # value 1e6 off the origin is 1e-3 px, thousands of widths, so the x, y and z intervals
         # collapsed onto their values, or moved with them off the returned point, verified
         _compare(where, determinacy, expected, earlier, width_slack=TRACK_WIDTH_SLACK, offsets=True, pooled=True)
+
+
+# A projection's depth this close to 0, relative to the sum of its terms' sizes, another order of
+# the same sum (the writer's batched einsum, the verifier's matmul) may round to 0 or not: the
+# residuals are then finite for one and not for the other, and a no_level track is not judged.
+DEPTH_ROUNDING = 1e-8
+# Of the largest float: a level or squared residual below this is finite under any rounding of
+# the same sums (a few ulps), where the writer's own may overflow only far above it.
+LEVEL_ROOM = 1e-6
+
+
+def _check_no_level(where: str, item: dict, cameras: np.ndarray, points: np.ndarray) -> None:
+    """A track stated not analysed (fractional.determinacy.no_level: "its residuals at the point
+    returned are not finite") claims nothing, so the reason must hold: its writer states it only
+    where the track's level at the returned point (tracks_many's and track's delta: 3^2 times the
+    squared residuals over 2n - 3, at least the pooled level and the certified gap) is not finite.
+    Refused where the residuals at the point returned, their squares and that level are surely
+    finite (every depth off 0 beyond its rounding, each well inside float range): the track's
+    intervals hidden behind a false reason (review 63 class 3). A point at infinity's writer
+    states at_infinity, and no point at all no determinacy: neither states this."""
+    point = item.get("point")
+    if point is None or item.get("at_infinity") is True:
+        raise Invalid("returned", f"{where} is stated not analysed for a track returning "
+                                  f"{'no point' if point is None else 'a point at infinity'} (its writer states "
+                                  f"{'none' if point is None else 'at_infinity'})")
+    try:
+        X = np.append(np.asarray(point, dtype=float), 1.0)
+        with np.errstate(all="ignore"):
+            proj = cameras @ X
+            reach = np.abs(cameras[:, 2, :]) @ np.abs(X)
+            if not (np.all(np.isfinite(proj)) and np.all(np.abs(proj[:, 2]) > DEPTH_ROUNDING * reach)):
+                return  # a depth at 0 (a point on a camera's centre) or one rounding may make 0: not judged
+            residuals = (proj[:, :2] / proj[:, 2:3] - points).ravel()
+            squares = residuals * residuals
+            cost = float(squares.sum())
+    except (TypeError, ValueError):
+        return  # (typed by the returned check)
+    redundancy = 2 * len(points) - 3
+    level = estimate.SIGMAS ** 2 * cost / redundancy if redundancy > 0 else 0.0
+    stated = item.get("cost"), item.get("lower_bound")
+    gap = certified_gap(float(stated[0]), float(stated[1])) if all(is_number(v) for v in stated) else None
+    room = LEVEL_ROOM * float(np.finfo(float).max)
+    if np.all(np.isfinite(squares)) and float(squares.max(initial=0.0)) < room and math.isfinite(level) \
+            and level < room and (gap is None or gap < room):
+        raise Invalid("returned", f"{where} is stated not analysed, its residuals at the point returned not finite; "
+                                  f"they are finite (their squares sum to {cost:.6g}, its level {level:.6g}): its "
+                                  "writer analyses such a track and states its intervals")
 
 
 def _check_point_values(where: str, determinacy: dict, point: Any) -> None:
@@ -414,9 +502,13 @@ def _check_maps(kind, result: dict, certificate: dict, earlier: bool = True) -> 
     read = kind.verification.read
     for index, item in enumerate(result.get("maps") or []):
         determinacy = item.get("determinacy") if isinstance(item, dict) else None
+        where = f"maps/{index}/determinacy"
+        if isinstance(determinacy, dict) and stopped(determinacy) and determinacy["warnings"][0].get("code") == \
+                "not_analysed":  # a time_limit is not judged (no writer of maps states one either)
+            raise Invalid("returned", f"{where} is stated not analysed: no writer of a map's estimate states that "
+                                      "(map_ states its intervals, or none where the data defeat it)")
         if not isinstance(determinacy, dict) or stopped(determinacy):
             continue
-        where = f"maps/{index}/determinacy"
         if item.get("matrix") is None:
             raise Invalid("returned", f"{where} is stated for a map returning no matrix (its writer states none)")
         source, target = read(certificate["data"], index)

@@ -152,7 +152,6 @@ def test_a_form_1_report_names_every_rule_its_form_lacks():
 
 # 2. proven_reason: free text
 
-@pytest.mark.xfail(strict=True, reason="review 63 class 2: proven_reason is any text beside a null")
 def test_a_proven_reason_where_no_proof_was_asked_is_refused():
     """The stored stratified document: its method proves no interval and none was asked; a stage
     stating a reason that reads as a proof verifies."""
@@ -180,7 +179,6 @@ def _triangulation_today() -> dict:
     return json.loads(json.dumps(solve_job(job)))
 
 
-@pytest.mark.xfail(strict=True, reason="review 63 class 3: not_analysed is not checked against the residuals")
 def test_an_analysable_track_stated_not_analysed_is_refused():
     """The example solved today (today's form): its widest track's determinacy replaced by
     no_level's (its residuals said not finite, its intervals gone) verifies."""
