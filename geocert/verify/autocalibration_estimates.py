@@ -34,7 +34,7 @@ import numpy as np
 from geocert.formulations.autocalibration import determinacy as writer
 from geocert.formulations.autocalibration import metric_relaxation
 from geocert.formulations.autocalibration.problem import w_of_K
-from geocert.core.determinacy import RANGE_EDGE_FORM, certified_gap, clip, form, safely
+from geocert.core.determinacy import ASPECT_EDGE_FORM, RANGE_EDGE_FORM, certified_gap, clip, form, safely
 from geocert.core.strict import Invalid
 from geocert.verify import estimates
 
@@ -172,7 +172,7 @@ def _surely_on_aspect_end(value, bounds: tuple[float, float] | None) -> float | 
     """K's aspect where determinacy.aspect_cut reports it however the writer's rounding went: the
     range surely wider than two tolerances, the aspect within half the writer's EDGE of an end (or
     beyond); else None."""
-    if bounds is None:
+    if bounds is None or form() < ASPECT_EDGE_FORM:
         return None
     fx, fy = float(value[0]), float(value[1])
     if not (fx > 0 and math.isfinite(fx) and math.isfinite(fy)):

@@ -52,7 +52,7 @@ import numpy as np
 
 from geocert.formulations.autocalibration import frames
 from geocert.formulations.autocalibration import metric_relaxation
-from geocert.core.determinacy import (OWN_SCALE_FORM, RANGE_EDGE_FORM, RELATIVE_WIDTH, SIGMAS, certified_gap, clip,
+from geocert.core.determinacy import (ASPECT_EDGE_FORM, OWN_SCALE_FORM, RELATIVE_WIDTH, SIGMAS, certified_gap, clip,
                                       cost_increase, curvature_intervals, form, image_scale, interval, not_analysed,
                                       numeric_jacobian, ranges_at, spread, sublevel_rays, tick)
 
@@ -551,9 +551,9 @@ def aspect_cut(value, lowest: float, highest: float) -> str | None:
     as a focal length's (core.determinacy.tolerance): a range no wider than two tolerances fixes
     it by itself (the default, 0.95 to 1.05), the user's statement of it, and is not reported
     (clipped_to_scope's narrow range, whose spanning the aspect, stating no interval, cannot ask).
-    Form RANGE_EDGE_FORM on (documents of that form written before this rule did not state it)."""
+    Form ASPECT_EDGE_FORM on."""
     fx, fy = float(value[0]), float(value[1])
-    if form() < RANGE_EDGE_FORM or not (fx > 0 and math.isfinite(fx) and math.isfinite(fy)):
+    if form() < ASPECT_EDGE_FORM or not (fx > 0 and math.isfinite(fx) and math.isfinite(fy)):
         return None
     aspect = fy / fx
     if highest - lowest <= 2.0 * RELATIVE_WIDTH * abs(aspect):
