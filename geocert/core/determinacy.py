@@ -48,7 +48,8 @@ RELATIVE_WIDTH = 0.1  # `determined`: every interval within this fraction of its
 # forms 0 and 1 used SIGMAS standard errors whatever the degrees of freedom; an
 # autocalibration's principal point and skew are held to the image's scale (image_scale), not the
 # focal length's; and a stage with no redundancy must state no_redundancy (verify.estimates.
-# check_no_redundancy).
+# check_no_redundancy), and one whose K interval (or aspect) the scope cuts must state
+# at_range_edge. FORM_RULES (below) pairs each rule with the first form holding it.
 FORMS = ({"determinacy": "every interval states its tolerance"},
          {"determinacy": "every interval states its tolerance",
           "level": "the Student quantile of the residual degrees of freedom",
@@ -61,6 +62,35 @@ STUDENT_FORM = 2  # the first form whose levels use the Student quantile
 OWN_SCALE_FORM = 2  # the first form giving a principal point and skew a scale of their own (image_scale)
 NO_REDUNDANCY_FORM = 2  # the first form whose verifier requires no_redundancy where a stage has none
 RANGE_EDGE_FORM = 2  # the first form whose verifier requires at_range_edge where the scope cuts an interval
+ASPECT_EDGE_FORM = 2  # the first form whose at_range_edge covers K's aspect on its range's end (review 63)
+TOLERANCE_FORM = 1  # the first form whose intervals state a tolerance, ``determined`` read against it
+
+# Each form's rules with their words (what a form before the rule's does not hold the document
+# to): the report of a document of an earlier form lists every rule its form lacks (``lacked``),
+# each paired here with the constant its code is gated on, so a rule added under a form is
+# stated where it is missing (review 63: a form-1 report named only the level).
+FORM_RULES = (
+    (TOLERANCE_FORM, "every interval states its tolerance and determined means each within it (the form reads "
+                     "determined as every interval bounded)"),
+    (STUDENT_FORM, "levels use the Student quantile of the fit's residual degrees of freedom (the form's are "
+                   f"{SIGMAS:g}^2 times the residual variance whatever its degrees of freedom, so an estimate "
+                   "from few residuals may be narrower than today's writer would state)"),
+    (STUDENT_FORM, "few_degrees_of_freedom is warned of a level from one degree of freedom (not required)"),
+    (OWN_SCALE_FORM, "an autocalibration's principal point and skew are held to a tolerance of a tenth of half the "
+                     "image's larger side (the form's is a tenth of the focal length, wider than the principal "
+                     "point's whole range on a long focal length)"),
+    (NO_REDUNDANCY_FORM, "no_redundancy is required of an autocalibration stage with no residual beyond its "
+                         "parameters (not required: such a stage may claim determined)"),
+    (RANGE_EDGE_FORM, "at_range_edge is required where the intrinsics ranges cut a K interval (not required: a K "
+                      "pinned on a range's end may claim determined)"),
+    (ASPECT_EDGE_FORM, "at_range_edge is required where K's aspect focal_y / focal_x lies on its range's end (not "
+                       "required)"),
+)
+
+
+def lacked(number: int) -> list[str]:
+    """The words of every rule (FORM_RULES) a document of form ``number`` is not held to."""
+    return [words for first, words in FORM_RULES if number < first]
 
 # The form estimates are computed in: today's for a writer; a verifier reading a document of an
 # earlier form recomputes its estimates in that form (``reading``).

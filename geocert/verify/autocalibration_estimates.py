@@ -34,7 +34,7 @@ import numpy as np
 from geocert.formulations.autocalibration import determinacy as writer
 from geocert.formulations.autocalibration import metric_relaxation
 from geocert.formulations.autocalibration.problem import w_of_K
-from geocert.core.determinacy import RANGE_EDGE_FORM, certified_gap, clip, form, safely
+from geocert.core.determinacy import ASPECT_EDGE_FORM, RANGE_EDGE_FORM, certified_gap, clip, form, safely
 from geocert.core.strict import Invalid
 from geocert.verify import estimates
 
@@ -149,18 +149,41 @@ def _check_range_edge(stated: dict, found: dict, where: str) -> None:
     984.8 in [929.6, 990] under the range [300, 990], the truth 1000, restated determined). Only a
     cut that holds beyond the walk's slack is required: each interval's ends moved in by it (and,
     for a range no wider than the tolerance allows, out by it before asking whether the interval
-    spans the range), its value within half the writer's EDGE of the end; a cut the writer's
-    rounding may not have seen is left to its word."""
+    spans the range), its value within half the writer's EDGE of the end; and K's aspect within
+    half the writer's EDGE of its range's end (determinacy.aspect_cut: review 63, a range no box
+    holds); a cut the writer's rounding may not have seen is left to its word."""
     if form() < RANGE_EDGE_FORM:
         return
     warnings = stated.get("warnings")
     if isinstance(warnings, list) and "at_range_edge" in [w.get("code") for w in warnings if isinstance(w, dict)]:
         return
-    for found, (lowest, highest) in zip(found["unclipped"], found["scope"]):
-        if _surely_cut(found, lowest, highest):
+    for interval, (lowest, highest) in zip(found["unclipped"], found["scope"]):
+        if _surely_cut(interval, lowest, highest):
             raise Invalid("returned", f"{where}/warnings state no at_range_edge: the intrinsics ranges cut the "
-                                      f"interval of {found['name']} (value {found['value']:.6g}, range "
+                                      f"interval of {interval['name']} (value {interval['value']:.6g}, range "
                                       f"[{lowest}, {highest}]), made again")
+    aspect = _surely_on_aspect_end(found["walk"]["value"], found.get("aspect"))
+    if aspect is not None:
+        raise Invalid("returned", f"{where}/warnings state no at_range_edge: K's aspect focal_y / focal_x "
+                                  f"{aspect:.6g} lies on its range's end {list(found['aspect'])} (review 63)")
+
+
+def _surely_on_aspect_end(value, bounds: tuple[float, float] | None) -> float | None:
+    """K's aspect where determinacy.aspect_cut reports it however the writer's rounding went: the
+    range surely wider than two tolerances, the aspect within half the writer's EDGE of an end (or
+    beyond); else None."""
+    if bounds is None or form() < ASPECT_EDGE_FORM:
+        return None
+    fx, fy = float(value[0]), float(value[1])
+    if not (fx > 0 and math.isfinite(fx) and math.isfinite(fy)):
+        return None
+    aspect, (lowest, highest) = fy / fx, bounds
+    if highest - lowest <= 2.0 * writer.RELATIVE_WIDTH * abs(aspect) * (1.0 + WALK_SLACK):  # maybe narrow
+        return None
+    for edge, sign in ((lowest, -1.0), (highest, 1.0)):
+        if sign * (aspect - edge) >= -0.5 * writer.EDGE * max(abs(edge), 1.0):
+            return aspect
+    return None
 
 
 def _surely_cut(found: dict, lowest: float | None, highest: float | None) -> bool:

@@ -24,7 +24,7 @@ from geocert.core.self_check import SelfCheckFailed
 from geocert.core.certificates import (BOUND_TOLERANCE, CLAIM_OPTIONS, FORMAT, OBJECTIVE_TOLERANCE, VERSION,
                                        data_digest, data_hash, problem_hash)
 from geocert.core.geometry import cost_rounding, is_number, norm_cost, residual_lengths
-from geocert.core.determinacy import CURRENT_FORM, ESTIMATES_FORM, FORMS, reading
+from geocert.core.determinacy import CURRENT_FORM, ESTIMATES_FORM, FORMS, lacked, reading
 from geocert.verify.notes import check_notes
 from geocert.core.strict import (WORK_BASE, WORK_PER_UNIT, Invalid, document_size, nesting_depth,
                                  informational, number as _number, printable_tree, record, same, same_counts,
@@ -645,7 +645,7 @@ def _problem_form(document: dict, options: dict, names: tuple[str, ...], marks: 
         for number in range(CURRENT_FORM - 1, 0, -1):
             marked = problem_hash(kind, data, options, names, FORMS[number - 1], values, digest)
             if marked == document["problem_sha256"]:
-                return names, _earlier_mark(FORMS[number - 1]), False, number
+                return names, _earlier_mark(FORMS[number - 1], number), False, number
     if marks and problem_hash(kind, data, options, names, values=values, digest=digest) \
             == document["problem_sha256"]:
         return names, _unmarked_form(names, marks), True, 0
@@ -697,21 +697,27 @@ def _check_hashes(document: dict, options: dict) -> tuple[tuple[str, ...], str |
 
 def _unmarked_form(names: tuple[str, ...], marks: dict) -> str:
     """What the report's scope says of a document hashed without the form its kind declares
-    (Verification.hash_marks: the estimates' form, determinacy.ESTIMATES_FORM)."""
+    (Verification.hash_marks: the estimates' form, determinacy.ESTIMATES_FORM): every rule of the
+    estimates' forms it is not held to (determinacy.lacked)."""
     return (f"the earlier form: it covers the kind, the data and {', '.join(names)}, not the form today's documents "
             f"declare ({marks!r}). Compare it with your request: a document of this form was written before "
             "every determinacy interval stated its tolerance, so an estimate whose intervals state none is read as "
             "such a document's, its determined meaning every interval bounded (not within a tenth of its "
-            "quantity's scale)")
+            f"quantity's scale). {_lacked(0)}")
 
 
-def _earlier_mark(marks: dict) -> str:
-    """What the report's scope says of a document hashed with an earlier mark of the estimates'
-    form (determinacy.FORMS): its estimates are recomputed in that form."""
+def _earlier_mark(marks: dict, number: int) -> str:
+    """What the report's scope says of a document hashed with the mark of the estimates' earlier
+    form ``number`` (determinacy.FORMS): its estimates are recomputed in that form, and every rule
+    that form lacks is named (determinacy.lacked)."""
     return (f"an earlier form of the estimates ({marks!r}), not today's ({ESTIMATES_FORM!r}): its determinacy "
-            "estimates are read as that form wrote them, their levels SIGMAS squared times the fit's residual "
-            "variance whatever its degrees of freedom (no Student quantile), so an estimate from few residuals "
-            "may be narrower than today's writer would state")
+            f"estimates are read as that form wrote them. {_lacked(number)}")
+
+
+def _lacked(number: int) -> str:
+    rules = lacked(number)
+    return ("Today's rules this form is not held to, so that a document restated in it may claim what today's "
+            "would refuse: " + "; ".join(f"({k}) {words}" for k, words in enumerate(rules, 1)) + ".") if rules else ""
 
 
 # What a result returns of each item, which must equal what its certificate proves (and the

@@ -36,7 +36,8 @@ Two warnings say where the data, not the motion, fall short (each makes the stag
 ``determined``). ``at_range_edge`` where an interval is cut by the scope (its unclipped end
 reaches beyond an intrinsics range's end, or its value lies on one): the scope, not the data,
 bounds it, and the truth may lie beyond (a focal length beyond the default range's 5 image
-sides). A range no wider than what ``determined`` allows (the default skew's) fixes its quantity
+sides); and (form 2) where K's aspect, focal_y / focal_x, lies on its range's end, a range
+of the scope no interval's box holds (aspect_cut). A range no wider than what ``determined`` allows (the default skew's) fixes its quantity
 by itself: an end beyond it is not reported, nor a value on its end where the interval spans it.
 ``no_redundancy`` where a cost has no residual beyond its parameters (the affine stage of four
 views: three modulus constraints, three unknowns, an exact fit at one of their discrete
@@ -51,9 +52,9 @@ import numpy as np
 
 from geocert.formulations.autocalibration import frames
 from geocert.formulations.autocalibration import metric_relaxation
-from geocert.core.determinacy import (OWN_SCALE_FORM, RELATIVE_WIDTH, SIGMAS, certified_gap, clip, cost_increase,
-                                      curvature_intervals, form, image_scale, interval, not_analysed, numeric_jacobian,
-                                      ranges_at, spread, sublevel_rays, tick)
+from geocert.core.determinacy import (ASPECT_EDGE_FORM, OWN_SCALE_FORM, RELATIVE_WIDTH, SIGMAS, certified_gap, clip,
+                                      cost_increase, curvature_intervals, form, image_scale, interval, not_analysed,
+                                      numeric_jacobian, ranges_at, spread, sublevel_rays, tick)
 
 # Radians: rotations given exactly (a metric reconstruction's) carry no noise estimate, and are not
 # taken as known better than 0.6 degrees. Adjusted along a critical family they scatter by that
@@ -542,6 +543,28 @@ def clipped_to_scope(found: dict, lowest: float | None, highest: float | None) -
     return clip(found, lowest, highest), (f"{found['name']} ({' and '.join(cut)})" if cut else None)
 
 
+def aspect_cut(value, lowest: float, highest: float) -> str | None:
+    """Where K's aspect (focal_y / focal_x, ``value`` K's five NAMES) lies on (or beyond) an end of
+    the aspect range, a range of the stratified scope that no interval's box holds (scope_of clips
+    focal_y to [focal's low * aspect's low, focal's high * aspect's high], which a K pinned on the
+    aspect's end lies well inside): what it says (None: not cut). The aspect's scale is its value,
+    as a focal length's (core.determinacy.tolerance): a range no wider than two tolerances fixes
+    it by itself (the default, 0.95 to 1.05), the user's statement of it, and is not reported
+    (clipped_to_scope's narrow range, whose spanning the aspect, stating no interval, cannot ask).
+    Form ASPECT_EDGE_FORM on."""
+    fx, fy = float(value[0]), float(value[1])
+    if form() < ASPECT_EDGE_FORM or not (fx > 0 and math.isfinite(fx) and math.isfinite(fy)):
+        return None
+    aspect = fy / fx
+    if highest - lowest <= 2.0 * RELATIVE_WIDTH * abs(aspect):
+        return None
+    for end, edge, sign in (("lower", lowest, -1.0), ("upper", highest, 1.0)):
+        if sign * (aspect - edge) >= -EDGE * max(abs(edge), 1.0):
+            return (f"the aspect focal_y / focal_x (its value {aspect:.6g} lies on the aspect range's {end} end "
+                    f"{edge:.6g})")
+    return None
+
+
 def range_edge(cut: list[str | None]) -> list[dict]:
     """The ``at_range_edge`` warning naming the quantities whose intervals the scope cut (none: no
     warning)."""
@@ -638,8 +661,12 @@ def metric_intervals(problem, p: np.ndarray, w: np.ndarray, gap: float | None, d
     unclipped = [interval(name, value[k], lower_end[k], upper_end[k], scales[k]) for k, name in enumerate(NAMES)]
     scope = (direct_scope_of if direct else scope_of)(problem)
     clipped = [clipped_to_scope(dict(found), *bounds) for found, bounds in zip(unclipped, scope)]
+    # the stratified scope's aspect range, which none of the boxes holds (aspect_cut); the direct
+    # method's scope is its combination, no aspect range of its own
+    aspect = None if direct else tuple(float(e) for e in problem.ranges["aspect"])
+    cut = [cut for _, cut in clipped] + ([] if aspect is None else [aspect_cut(value, *aspect)])
     return {"walk": walk, "family": family, "intervals": [found for found, _ in clipped],
-            "cut": [cut for _, cut in clipped], "unclipped": unclipped, "scope": scope}
+            "cut": cut, "unclipped": unclipped, "scope": scope, "aspect": aspect}
 
 
 def metric_stage(problem, p: np.ndarray, K_pixels: np.ndarray, cost: float | None, lower: float | None,
