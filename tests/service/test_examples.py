@@ -18,6 +18,8 @@ import httpx
 import numpy as np
 import pytest
 
+from geocert.core.determinacy import fixes
+
 from tests.servers import cluster
 from tests.support import ROOT, SHARED_DATA
 
@@ -201,8 +203,19 @@ def check_autocalibration(job, truth, result):
     K, true_K = np.asarray(result["K"]), np.asarray(truth["K"])
     assert abs(K[0, 0] / true_K[0, 0] - 1) < 0.02 and abs(K[1, 1] / true_K[1, 1] - 1) < 0.02
     assert np.abs(K[:2, 2] - true_K[:2, 2]).max() < 20  # pixels, of a 1000 px image at 0.1% noise
+    entries = {"focal_x": (0, 0), "focal_y": (1, 1), "skew": (0, 1), "principal_u": (0, 2), "principal_v": (1, 2)}
     for stage in result["stages"]:
-        assert stage["determinacy"]["determined"]
+        determinacy = stage["determinacy"]
+        assert determinacy["warnings"] == []  # a general motion: nothing critical, nothing cut by a range
+        assert determinacy["determined"] == all(fixes(i) for i in determinacy["intervals"])
+        K_intervals = [i for i in determinacy["intervals"] if i["name"] in entries]
+        # the focal lengths fixed; six views' principal point need not be, within a tenth of half
+        # the image's side (the estimates' form 2)
+        assert all(fixes(i) for i in K_intervals if i["name"].startswith("focal"))
+        for found in K_intervals:  # every bounded interval holds the truth
+            true = true_K[entries[found["name"]]]
+            assert found["lower"] is None or found["lower"] <= true, found
+            assert found["upper"] is None or true <= found["upper"], found
 
 
 def check_turntable(job, truth, result):

@@ -52,7 +52,7 @@ run on the JSON text):
   numpy scalars and array entries, in a tuple, behind a string or a huge integer in the same
   list, nested in dicts: 24 of 24 refused; a clean document with a 400-digit integer passes.
 
-Found (classes 2 and 3 strict xfails, failing on today's code; classes 1 and 4 fixed, their tests
+Found (each a strict xfail when written, failing on the code then; all four fixed since, their tests
 ordinary):
 
 1. The report of a form-1 document states only the level's difference. ``scope.problem_sha256``
