@@ -207,15 +207,20 @@ CASES = {f.__name__: f for f in (triangulation_l2l2, triangulation_l1l1_max_resi
                                  reconstruction_labelled)}
 
 
-def main(names: list[str]) -> None:
-    for name in names or CASES:
-        result = CASES[name]()
+def write(cases: dict, names: list[str], folder: Path) -> None:
+    """Each of ``cases`` named (all for none) made, verified and written to ``folder`` as NAME.json."""
+    for name in names or cases:
+        result = cases[name]()
         report = verify_any(result)
         if not report.valid:
             raise RuntimeError(f"{name}: {report.first_failure}")
         text = json.dumps(result, separators=(",", ":"), allow_nan=False)
-        (HERE / f"{name}.json").write_text(text + "\n")
+        (folder / f"{name}.json").write_text(text + "\n")
         print(f"{name}: {len(text)} bytes, {report.items_checked} items checked", flush=True)
+
+
+def main(names: list[str]) -> None:
+    write(CASES, names, HERE)
 
 
 if __name__ == "__main__":

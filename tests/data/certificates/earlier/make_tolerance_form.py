@@ -8,7 +8,6 @@ on the path (a checkout of it, here /tmp/old), from anywhere:
 
 from __future__ import annotations
 
-import json
 import sys
 from pathlib import Path
 
@@ -20,7 +19,7 @@ sys.path.append(str(HERE.parents[3]))  # for tests.support (geocert: from PYTHON
 from geocert.core.determinacy import ESTIMATES_FORM  # noqa: E402
 from geocert.jobs.runner import solve_job  # noqa: E402
 from geocert.kinds import get_kind  # noqa: E402
-from geocert.verify.checks import verify_any  # noqa: E402
+from tests.data.certificates.make_fixtures import write  # noqa: E402
 from tests.support import map_job, seed  # noqa: E402
 
 
@@ -55,14 +54,7 @@ CASES = {f.__name__: f for f in (resection_six_points_tolerance_form, autocalibr
 def main(names: list[str]) -> None:
     if ESTIMATES_FORM != {"determinacy": "every interval states its tolerance"}:
         raise RuntimeError(f"the code on the path writes the form {ESTIMATES_FORM!r}, not form 1")
-    for name in names or CASES:
-        result = CASES[name]()
-        report = verify_any(result)
-        if not report.valid:
-            raise RuntimeError(f"{name}: {report.first_failure}")
-        text = json.dumps(result, separators=(",", ":"), allow_nan=False)
-        (HERE / f"{name}.json").write_text(text + "\n")
-        print(f"{name}: {len(text)} bytes, {report.items_checked} items checked", flush=True)
+    write(CASES, names, HERE)
 
 
 if __name__ == "__main__":
