@@ -50,7 +50,7 @@ def test_a_corridor_walks_translation_is_within_10_percent_or_marked(solver):
     assert wrong_and_marked > 0  # the scene is the hard one it is meant to be
 
 
-@pytest.mark.parametrize("solver,least", [("incremental", 3), ("polynomial", 2)])
+@pytest.mark.parametrize("solver,least", [("incremental", 3), ("polynomial", 1)])
 def test_a_well_seen_translation_is_determined_and_right(solver, least):
     """Lines 1.5 to 4 m away all round the view, 30 cm a frame: the pairs that say their
     translation is determined are within 10% of it, and some say so (the marking is not merely
@@ -58,7 +58,8 @@ def test_a_well_seen_translation_is_determined_and_right(solver, least):
     stretched to take in the step to it, which leaves some right translations marked). Sixteen
     pairs: the polynomial solver's RANSAC finds one of the first six determined or none as the
     rounding of its equations goes (one in six in metres, none in units of the scene's depth; two
-    of the sixteen either way, incremental six)."""
+    of the sixteen either way at the estimates' form 1, one at form 2's Student level, which
+    widens its intervals; incremental six)."""
     rng = np.random.default_rng(11)
     determined = 0
     for _ in range(16):
