@@ -201,6 +201,24 @@ def lengths(x: np.ndarray, axis: int = -1) -> np.ndarray:
     return np.sqrt((x * x).sum(axis=axis))
 
 
+# Magnitudes whose squares (and sums of a few of them) neither underflow nor overflow; outside,
+# a length is read at an exact power of two (square_safe_shift) so a world in a tiny or huge unit
+# gets the same figures as in metres, scaled. Inside, the code paths are unchanged.
+SQUARES_SAFE = (1e-150, 1e150)
+
+
+def outside_squares(largest):
+    """Whether positive finite magnitudes (a float or an array) lie outside SQUARES_SAFE."""
+    low, high = SQUARES_SAFE
+    return (largest > 0) & np.isfinite(largest) & ((largest < low) | (largest > high))
+
+
+def square_safe_shift(largest: float) -> int:
+    """The power of two bringing ``largest`` near 1 where it lies outside SQUARES_SAFE; 0 inside
+    (and for 0 or a non-finite number: nothing to scale)."""
+    return -math.frexp(largest)[1] if bool(outside_squares(largest)) else 0
+
+
 def unit_frobenius(M: np.ndarray) -> np.ndarray:
     """M / its Frobenius norm, also where the norm's squares underflow or overflow (a camera in
     a tiny world unit has entries near 1e300): there M is first brought to a largest entry near 1
@@ -208,7 +226,7 @@ def unit_frobenius(M: np.ndarray) -> np.ndarray:
     same floats as before."""
     with np.errstate(over="ignore", under="ignore"):
         size = float(np.linalg.norm(M))
-    if 1e-150 < size < 1e150:
+    if SQUARES_SAFE[0] < size < SQUARES_SAFE[1]:
         return M / size
     largest = float(np.max(np.abs(M)))
     if not 0.0 < largest < math.inf:

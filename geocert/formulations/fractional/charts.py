@@ -13,7 +13,7 @@ from fractions import Fraction
 
 import numpy as np
 
-from geocert.core.geometry import lengths
+from geocert.core.geometry import lengths, outside_squares, square_safe_shift
 from geocert.core.strict import charge
 from geocert.formulations.fractional.relaxation import FractionalProgram
 
@@ -25,11 +25,9 @@ def camera_centres(cameras: np.ndarray) -> np.ndarray:
 
 
 def _spread_shift(offsets: np.ndarray) -> int:
-    """The power of two bringing the largest offset near 1 where the squares of the offsets'
-    lengths underflow (below 1e-150) or overflow (above 1e150); 0 between, where the lengths are
-    computed as they always were (the charts of documents written before are the same floats)."""
-    largest = float(np.max(np.abs(offsets))) if offsets.size else 0.0
-    return -math.frexp(largest)[1] if 0.0 < largest < 1e-150 or 1e150 < largest < math.inf else 0
+    """core.geometry.square_safe_shift of the largest offset: 0 where the lengths are computed as
+    they always were (the charts of documents written before are the same floats)."""
+    return square_safe_shift(float(np.max(np.abs(offsets))) if offsets.size else 0.0)
 
 
 def _near_one(cams: np.ndarray) -> np.ndarray:
@@ -38,7 +36,7 @@ def _near_one(cams: np.ndarray) -> np.ndarray:
     framed cameras' entries are near 1e-300 and their rows' lengths underflowed to 0; cameras
     between are untouched (the same floats as before)."""
     largest = np.max(np.abs(cams), axis=(1, 2))
-    outside = ((largest < 1e-150) | (largest > 1e150)) & (largest > 0) & np.isfinite(largest)
+    outside = outside_squares(largest)
     if not outside.any():
         return cams
     shift = np.where(outside, -np.frexp(np.where(outside, largest, 1.0))[1], 0)

@@ -18,6 +18,7 @@ from fractions import Fraction
 
 import numpy as np
 
+from geocert.core.geometry import SQUARES_SAFE, square_safe_shift
 from geocert.formulations.fractional.fixed_order import mul, norm
 
 
@@ -32,7 +33,7 @@ def normaliser(points: np.ndarray) -> tuple[np.ndarray, float]:
     # gave the scale of 1e-300 and a centre at the centroid (review 61). (Above 1e150 the squares
     # overflow, the scale is 0 and no estimate is made, as the data's exact cost overflows too.)
     largest = float(np.max(np.abs(offsets))) if offsets.size else 0.0
-    shift = -math.frexp(largest)[1] if 0.0 < largest < 1e-150 else 0
+    shift = square_safe_shift(largest) if largest < SQUARES_SAFE[0] else 0
     offsets = np.ldexp(offsets, shift)
     squares = offsets[:, 0] * offsets[:, 0]
     for j in range(1, points.shape[1]):

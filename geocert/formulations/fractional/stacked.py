@@ -25,7 +25,7 @@ from geocert.core.certificates import BOUND_TOLERANCE, OBJECTIVE_TOLERANCE, TERM
 from geocert.core.bnb import Box
 from geocert.core.cones import ConeSpec, _project_rows, rounding_counted, stacked_rounding_margin, subnormal
 from geocert.core.coverage import uncovered_part
-from geocert.core.geometry import cost_roundings, lengths, norm_terms, normalised_cameras
+from geocert.core.geometry import cost_roundings, lengths, norm_terms, normalised_cameras, outside_squares
 from geocert.core.strict import Invalid, charge, dual_vector, numbers
 from geocert.formulations.fractional.charts import reference_work
 from geocert.formulations.fractional.convexity import verify_sublevel
@@ -278,11 +278,6 @@ def _check_group(all_cameras: np.ndarray, members: list[_Track], n: int, k: int,
     return ok
 
 
-def _outside_squares(largest: np.ndarray) -> np.ndarray:
-    """Where a positive finite magnitude's square underflows or overflows (charts' test)."""
-    return (largest > 0) & np.isfinite(largest) & ((largest < 1e-150) | (largest > 1e150))
-
-
 def chart_arrays(cams: np.ndarray, points: np.ndarray):
     """charts.Chart.build for every track of a group: (num, den, T, reference, ok). ``ok`` is
     false where this path does not build the chart (a centre at infinity, or a depth row that
@@ -306,14 +301,14 @@ def chart_arrays(cams: np.ndarray, points: np.ndarray):
     # Charts whose spread or framed cameras are read at a power of two by Chart.build (a world
     # unit whose lengths' squares underflow or overflow: charts._spread_shift, charts._near_one)
     # are left to it, as is every track this path does not chart.
-    ok &= ~_outside_squares(np.max(np.abs(euclid - middle[:, None]), axis=(1, 2)))
+    ok &= ~outside_squares(np.max(np.abs(euclid - middle[:, None]), axis=(1, 2)))
     spread = lengths(euclid - middle[:, None]).sum(axis=1) / n
     spread = np.where(spread > 0, spread, 1.0)
     H = np.tile(np.eye(4), (G, 1, 1))
     H[:, :3, :3] *= spread[:, None, None]
     H[:, :3, 3] = middle
     framed = cams @ H[:, None]
-    ok &= ~np.any(_outside_squares(np.max(np.abs(framed), axis=(2, 3))), axis=1)
+    ok &= ~np.any(outside_squares(np.max(np.abs(framed), axis=(2, 3))), axis=1)
     framed = framed / lengths(framed[:, :, 2, :3])[..., None, None]
     every = np.arange(G)
     depth_row = framed[every, reference, 2]
