@@ -52,7 +52,7 @@ def cmd_solve(args: argparse.Namespace) -> int:
     os.environ.update(worker_environment(dict(os.environ)))
     from geocert.core.geometry import InputError
     from geocert.jobs.collection import start_up_heap_frozen
-    from geocert.jobs.finite import TITLE as FINITE_TITLE, NonFiniteResult
+    from geocert.jobs.finite import NonFiniteResult
     from geocert.jobs.runner import solve_job
 
     try:
@@ -81,8 +81,7 @@ def cmd_solve(args: argparse.Namespace) -> int:
                           "errors": [{"field": exc.field, "reason": exc.reason}]}), file=sys.stderr)
         return 2
     except NonFiniteResult as exc:  # jobs.finite: refused rather than written
-        print(json.dumps({"type": "about:blank", "title": FINITE_TITLE, "status": 500, "detail": str(exc),
-                          "errors": [{"field": exc.field, "reason": str(exc)}]}), file=sys.stderr)
+        print(json.dumps(exc.problem()), file=sys.stderr)
         return 1
     if sys.stderr.isatty():
         sys.stderr.write("\n")

@@ -28,6 +28,11 @@ class NonFiniteResult(ArithmeticError):
                          "numbers (one that cannot be computed is null, with its reason); this one was refused rather "
                          "than written: a defect of the solver, please report it with the job")
 
+    def problem(self) -> dict:
+        """The job's error as a problem document (RFC 9457), as the worker and the CLI state it."""
+        return {"type": "about:blank", "title": TITLE, "status": 500, "detail": str(self),
+                "errors": [{"field": self.field, "reason": str(self)}]}
+
 
 def refuse_non_finite(document: Any, field: str = "") -> None:
     """Raise NonFiniteResult naming the first inf or NaN in ``document`` (dicts, lists, tuples,

@@ -458,8 +458,7 @@ def end_with_result(jobs: JobStore, job_id: str, kind, options) -> None:
         result = assemble(kind, request, options, items, stats)
     except NonFiniteResult as exc:  # the caller holds the claim: end_with_error could not take it
         log.error("job %s: %s", job_id, exc)
-        jobs.end(job_id, "failed", error={"type": "about:blank", "title": FINITE_TITLE, "status": 500,
-                                          "detail": str(exc), "errors": [{"field": exc.field, "reason": str(exc)}]})
+        jobs.end(job_id, "failed", error=exc.problem())
         after_end(jobs, job_id)
         return
     _end(jobs, job_id, sums, stats, result=result, result_text=result_json(kind, result))
