@@ -54,7 +54,8 @@ FORMS = ({"determinacy": "every interval states its tolerance"},
          {"determinacy": "every interval states its tolerance",
           "level": "the Student quantile of the residual degrees of freedom",
           "scale": "a principal point's and skew's is half the image's larger side",
-          "warnings": "no_redundancy where a stage has none"})
+          "warnings": "no_redundancy where a stage has none, at_range_edge where the scope cuts K or its aspect, "
+                      "few_degrees_of_freedom from one"})
 ESTIMATES_FORM = FORMS[-1]
 CURRENT_FORM = len(FORMS)  # the number of today's form (0: unmarked, k: FORMS[k - 1])
 STUDENT_FORM = 2  # the first form whose levels use the Student quantile
