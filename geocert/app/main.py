@@ -114,6 +114,7 @@ class VerificationGate:
         self.app, self.limit, self.active = app, limit, 0
         self.path, self.what, self.variable = path, what, variable
         self.per_key, self.per_key_variable, self.by_key = per_key, per_key_variable, {}
+        self.in_flight = observability.GATED.labels(what.split()[-1])  # /metrics: how many this gate holds
 
     def _gated(self, path: str | None) -> bool:
         if path is None:
@@ -131,12 +132,14 @@ class VerificationGate:
             return await self._refuse(scope, receive, send, f"{self.per_key} {self.what} of this key are running in "
                                                             f"this process ({self.per_key_variable})")
         self.active += 1
+        self.in_flight.inc()
         if key is not None:
             self.by_key[key] = self.by_key.get(key, 0) + 1
         try:
             await self.app(scope, receive, send)
         finally:
             self.active -= 1
+            self.in_flight.dec()
             if key is not None:
                 self.by_key[key] -= 1
                 if not self.by_key[key]:

@@ -14,7 +14,7 @@ import time
 import uuid
 
 from fastapi import APIRouter, Response
-from prometheus_client import CONTENT_TYPE_LATEST, CollectorRegistry, Counter, Histogram, generate_latest
+from prometheus_client import CONTENT_TYPE_LATEST, CollectorRegistry, Counter, Gauge, Histogram, generate_latest
 from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
 from geocert import logs
@@ -27,6 +27,8 @@ REQUESTS = Counter("geocert_http_requests", "HTTP requests by method, route and 
 LATENCY = Histogram("geocert_http_request_seconds", "Time to the response's first byte, by method and route",
                     ["method", "route"], registry=REGISTRY,
                     buckets=(0.002, 0.005, 0.01, 0.025, 0.05, 0.1, 0.25, 0.5, 1.0, 2.5, 5.0))
+GATED = Gauge("geocert_gated_requests", "Requests in flight behind one of this API process's concurrency gates "
+              "(GEOCERT_MAX_CONCURRENT_*): verifications, orientations, exports", ["gate"], registry=REGISTRY)
 _SANE_ID = re.compile(r"[A-Za-z0-9._:-]{1,128}")
 _collector_registered = False
 

@@ -120,6 +120,18 @@ def first_delivery(client, receiver) -> str:
 # A server with its default limits and no webhook destinations allowed beyond public ones
 
 
+def held_by_gate(client: httpx.Client, gate: str, count: int) -> None:
+    """Wait until the API process's ``gate`` holds ``count`` requests (its /metrics gauge): what a
+    test sends after that meets the gate full, whatever the machine's load."""
+    line = f'geocert_gated_requests{{gate="{gate}"}} '
+    guard = time.monotonic() + 600  # against a hang only: no outcome depends on it
+    while (held := next((float(row[len(line):]) for row in client.get("/metrics").text.splitlines()
+                         if row.startswith(line)), 0.0)) < count:
+        assert time.monotonic() < guard, f"the {gate} gate holds {held:g} requests, not {count}"
+        time.sleep(0.05)
+    assert held == count, f"the {gate} gate holds {held:g} requests, not {count}"
+
+
 @pytest.fixture(scope="module")
 def plain(tmp_path_factory):
     with cluster(tmp_path_factory.mktemp("plain"), workers=1) as (running, client):
@@ -196,11 +208,8 @@ def test_6_orientations_at_once_are_bounded(plain):
     try:
         for thread in held:
             thread.start()
-        deadline = time.monotonic() + 30
-        while (third := client.post("/v1/orient", content=body,  # let in until the held two have arrived
-                                    headers={"content-type": "application/json"})).status_code == 200:
-            assert time.monotonic() < deadline, "a third orientation was let in while two were running"
-            time.sleep(0.2)
+        held_by_gate(client, "orientations", 2)  # a third sent before they arrived would be let in, rightly
+        third = client.post("/v1/orient", content=body, headers={"content-type": "application/json"})
         assert "GEOCERT_MAX_CONCURRENT_ORIENTATIONS" in problem(third, 429)["detail"]
     finally:
         release.set()
@@ -687,20 +696,19 @@ def test_exports_are_bounded_per_process_and_per_key_and_written_outside_the_api
                    for k in range(2)]
         nowhere = f"/v1/jobs/{'0' * 32}/export?format=ply"  # a 404 at once when let in: never held
 
-        def refused_while_held(sender, key) -> dict:
-            sender.start()
-            deadline = time.monotonic() + 30
-            while (answer := client.get(nowhere, headers=key)).status_code != 429:
-                assert answer.status_code in (404, 422), answer.text
-                assert time.monotonic() < deadline, "the held export was not counted"
-                time.sleep(0.1)
+        def refused_while_held(k: int, key) -> dict:
+            """Export ``k`` sent and held by the gate, then a request of ``key`` refused. (A request
+            sent before the export arrived would be let in, and the export refused, rightly.)"""
+            senders[k].start()
+            held_by_gate(client, "exports", k + 1)
+            answer = client.get(nowhere, headers=key)
             assert answer.headers["Retry-After"]
             return problem(answer, 429)
 
         try:
-            assert "GEOCERT_MAX_CONCURRENT_EXPORTS_PER_KEY" in refused_while_held(senders[0], keys[0])["detail"]
+            assert "GEOCERT_MAX_CONCURRENT_EXPORTS_PER_KEY" in refused_while_held(0, keys[0])["detail"]
             assert client.get(nowhere, headers=keys[1]).status_code in (404, 422)  # another key's are let in
-            detail = refused_while_held(senders[1], keys[2])["detail"]
+            detail = refused_while_held(1, keys[2])["detail"]
             assert "GEOCERT_MAX_CONCURRENT_EXPORTS" in detail and "PER_KEY" not in detail
             assert client.get("/v1/jobs", headers=keys[2]).status_code == 200
             assert not answers, "an export was answered while the export processes were stopped"
