@@ -498,11 +498,12 @@ class TestPooledNoise:
 class TestOneTrackJobs:
     """A triangulation job of one 2-view track, as a user sends a single point: its pool is the
     track itself, one degree of freedom, so its level is a noise estimate from one residual, the
-    6-point resection's case (issue 37, F3). On main such tracks on the Oxford Dinosaur's 36
-    projective cameras were `determined` with no warning: 0.5 px of noise, 3,200 such jobs (four
-    draws of 800), 869 determined, 15 of them missing the truth (1.7%; the same tracks pooled in
-    jobs of 800: 1 of 800), since those judged narrow are so mostly because their one residual is
-    small. Today's form warns `few_degrees_of_freedom` and determines none."""
+    6-point resection's case (issue 37, F3), which the documented rule says determines nothing. On
+    main such tracks on the Oxford Dinosaur's 36 projective cameras were `determined` with no
+    warning: 0.5 px of noise, eight draws of 800 such jobs, 1,698 determined, 20 of them missing
+    the truth (1.2%: 15 of 869 in one set of four draws, 5 of 829 in bench.determinacy
+    --lone-tracks's); the same tracks pooled in one job missed 20 of 4,000 (0.5%). Today's form
+    warns `few_degrees_of_freedom` and determines none."""
 
     @staticmethod
     def jobs(count: int, seed: int = 11) -> tuple[list[dict], np.ndarray]:
