@@ -678,7 +678,8 @@ def lone_tracks(noise_px: float = 0.5, count: int = 800, seeds: tuple[int, ...] 
 def critical_real_layouts(noise_px: float = 0.5) -> list[str]:
     """Real near-critical layouts autocalibrated with the defaults: rings with elevation change
     (16 of the dino hemisphere's views within an elevation band, two draws a band) and KITTI
-    windows (12 frames of every 2nd or 4th, 15 consecutive; points ahead of the last frame):
+    windows (of the set's frames, every one or every 2nd from the first, up to 12, and 15 consecutive
+    from the 11th; points ahead of the last frame):
     each stage's warnings and `determined`."""
     from geocert.solvers import datasets
     from testing import photo_sets
@@ -707,7 +708,7 @@ def critical_real_layouts(noise_px: float = 0.5) -> list[str]:
             P = np.array([c.K @ np.hstack([c.R, c.t[:, None]]) for c in part])
             ahead = np.array([part[-1].center + part[-1].R[2] * z for z in (8.0, 60.0)])
             box = (ahead.min(axis=0) - [12, 3, 12], ahead.max(axis=0) + [12, 3, 12])
-            jobs.append((f"{key}, frames {start}::{step} x{m}", P, box, size, 0, None))
+            jobs.append((f"{key}, frames {start}::{step}, {len(part)} views", P, box, size, 0, None))
     for name, cameras, box, size, seed, intrinsics in jobs:
         scene = scenes.from_cameras(cameras, box, noise_px, seed=seed, image_size=size)
         result = solve_job({"kind": "autocalibration", "data": scene.job_data(),
