@@ -678,8 +678,8 @@ def lone_tracks(noise_px: float = 0.5, count: int = 800, seeds: tuple[int, ...] 
 def critical_real_layouts(noise_px: float = 0.5) -> list[str]:
     """Real near-critical layouts autocalibrated with the defaults: rings with elevation change
     (16 of the dino hemisphere's views within an elevation band, two draws a band) and KITTI
-    windows (of the set's frames, every one or every 2nd from the first, up to 12, and 15 consecutive
-    from the 11th; points ahead of the last frame):
+    windows (every 2nd of the set's views from the first, up to 12; every 4th, 7; 15 consecutive from
+    the 11th; points ahead of the last view):
     each stage's warnings and `determined`."""
     from geocert.solvers import datasets
     from testing import photo_sets
