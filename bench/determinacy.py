@@ -12,6 +12,8 @@ degenerate scenes (and real critical layouts) are flagged.
     .venv/bin/python -m bench.determinacy --direct-views-proven 6 --autocalibration-scenes 6  # each view's, direct
     .venv/bin/python -m bench.determinacy --direct-views-proven-real  # the same on the Model House's cameras
     .venv/bin/python -m bench.determinacy --direct-intrinsics-proven-real  # one K's proven intrinsics, Model House
+    .venv/bin/python -m bench.determinacy --lone-tracks      # jobs of one 2-view track (Dinosaur), against pooled
+    .venv/bin/python -m bench.determinacy --critical-real    # hemisphere elevation-band rings, KITTI windows
 
 Real sets: under $GEOCERT_BENCH_DATA (default bench-data beside the checkout) and $GEOCERT_SHARED_DATA (default
 /work/shared/data); those absent are left out.
@@ -636,6 +638,87 @@ def direct_intrinsics_proven_real(noise_px: float = 0.5) -> list[str]:
     return lines
 
 
+def lone_tracks(noise_px: float = 0.5, count: int = 800, seeds: tuple[int, ...] = (11, 12, 13, 14)) -> list[str]:
+    """A user's lone point: jobs of one 2-view track (the first two views of ``count`` of the
+    Dinosaur's own tracks, their certified points the truth, reprojected with noise_px), against
+    the same tracks in one job (pooled): how many are `determined`, and how many of those miss."""
+    from geocert.solvers import datasets
+
+    if not (SHARED_DATA / "oxford_dinosaur").exists():
+        return ["  the Oxford Dinosaur is absent (shared/data/oxford_dinosaur)"]
+    cameras, tracks = datasets.load_dinosaur(SHARED_DATA / "oxford_dinosaur")
+    lines = []
+    for seed in seeds:
+        rng = np.random.default_rng(seed)
+        chosen = rng.choice(len(tracks), count, replace=False)
+        truth = np.array([t["point"] for t in solve_job({"kind": "triangulation", "data": {
+            "cameras": cameras.tolist(), "tracks": [{"views": tracks[i].views, "points": tracks[i].points.tolist()}
+                                                    for i in chosen]}, "options": {"detail": "brief"}})["tracks"]])
+        lone = [{"views": list(map(int, tracks[i].views[:2])),
+                 "points": (project(cameras[tracks[i].views[:2]], X) + rng.normal(scale=noise_px, size=(2, 2))).tolist()}
+                for i, X in zip(chosen, truth)]
+        for how in ("alone", "pooled"):
+            items = [solve_job({"kind": "triangulation", "data": {"cameras": cameras.tolist(), "tracks": [t]},
+                                "options": {}})["tracks"][0] for t in lone] if how == "alone" else solve_job(
+                {"kind": "triangulation", "data": {"cameras": cameras.tolist(), "tracks": lone}, "options": {}})["tracks"]
+            determined = missed = warned = 0
+            for item, X in zip(items, truth):
+                d = item["determinacy"]
+                if d is None:
+                    continue
+                warned += "few_degrees_of_freedom" in [w["code"] for w in d["warnings"]]
+                if d["determined"]:
+                    determined += 1
+                    missed += not all(i["lower"] <= X[k] <= i["upper"] for k, i in enumerate(d["intervals"][:3]))
+            lines.append(f"  seed {seed}, {how}: {len(items)} tracks, few_degrees_of_freedom {warned}, determined "
+                         f"{determined}, of which missing the truth {missed}")
+    return lines
+
+
+def critical_real_layouts(noise_px: float = 0.5) -> list[str]:
+    """Real near-critical layouts autocalibrated with the defaults: rings with elevation change
+    (16 of the dino hemisphere's views within an elevation band, two draws a band) and KITTI
+    windows (every 2nd of the set's views from the first, up to 12; every 4th, 7; 15 consecutive from
+    the 11th; points ahead of the last view):
+    each stage's warnings and `determined`."""
+    from geocert.solvers import datasets
+    from testing import photo_sets
+
+    lines, jobs = [], []
+    hemisphere = BENCH_DATA / "middlebury_dino_cameras"
+    if hemisphere.exists():
+        views = datasets.load_middlebury(hemisphere)
+        d = views.centres - (views.box[0] + views.box[1]) / 2
+        up = d.mean(axis=0) / np.linalg.norm(d.mean(axis=0))
+        elevation = np.degrees(np.arcsin(d @ up / np.linalg.norm(d, axis=1)))
+        for lo, hi in ((10, 20), (25, 35), (40, 50)):
+            band = np.flatnonzero((elevation >= lo) & (elevation < hi))
+            for seed in (0, 1):
+                chosen = views.subset(np.random.default_rng(seed).choice(band, 16, replace=False))
+                jobs.append((f"hemisphere ring {lo}-{hi} deg (seed {seed})", chosen.cameras, chosen.box,
+                             chosen.image_size, seed, {"focal": [1000.0, 6000.0]}))
+    for key, size in (("kittiStraight", (1226, 370)), ("kittiTurn", (1241, 376))):
+        try:
+            chosen = photo_sets.load(key)
+        except photo_sets.MissingSet:
+            continue
+        cameras = [chosen.truth[name] for name in chosen.names]
+        for start, step, m in ((0, 2, 12), (0, 4, 12), (10, 1, 15)):
+            part = cameras[start::step][:m]
+            P = np.array([c.K @ np.hstack([c.R, c.t[:, None]]) for c in part])
+            ahead = np.array([part[-1].center + part[-1].R[2] * z for z in (8.0, 60.0)])
+            box = (ahead.min(axis=0) - [12, 3, 12], ahead.max(axis=0) + [12, 3, 12])
+            jobs.append((f"{key}, frames {start}::{step}, {len(part)} views", P, box, size, 0, None))
+    for name, cameras, box, size, seed, intrinsics in jobs:
+        scene = scenes.from_cameras(cameras, box, noise_px, seed=seed, image_size=size)
+        result = solve_job({"kind": "autocalibration", "data": scene.job_data(),
+                            "options": {"time_limit_s": 10, **({"intrinsics": intrinsics} if intrinsics else {})}})
+        said = "; ".join(f"{s['name']}: {[w['code'] for w in s['determinacy']['warnings']]} determined "
+                         f"{s['determinacy']['determined']}" for s in result["stages"] if s.get("determinacy"))
+        lines.append(f"  {name}: {said}")
+    return lines
+
+
 def report(title: str, rows: dict, flagged: int | None, n: int, degenerate: str, caught: int, m: int) -> None:
     print(f"\n{title}")
     print(f"  {'quantity':>14} | {'coverage':>8} | {'median width':>12} | {'median |error|':>14} | unbounded | "
@@ -753,9 +836,17 @@ def main() -> None:
                         help="the same on the Oxford Model House's cameras")
     parser.add_argument("--direct-intrinsics-proven-real", action="store_true",
                         help="the direct method's proven intrinsics (one K) on the Oxford Model House's cameras")
+    parser.add_argument("--lone-tracks", action="store_true",
+                        help="jobs of one 2-view track on the Dinosaur's cameras, against the same tracks pooled")
+    parser.add_argument("--critical-real", action="store_true",
+                        help="autocalibration of real near-critical layouts: hemisphere elevation bands, KITTI windows")
     args = parser.parse_args()
     rng = np.random.default_rng(19)
     began = time.perf_counter()
+    if args.lone_tracks:
+        return _section("Lone 2-view tracks on the Dinosaur's cameras (0.5 px)", lone_tracks, began)
+    if args.critical_real:
+        return _section("Real near-critical layouts (0.5 px): each stage's warnings", critical_real_layouts, began)
     if args.direct_intrinsics_proven_real:
         return _section("Direct autocalibration, one K, real cameras (0.5 px): its proven intrinsics",
                         direct_intrinsics_proven_real, began)

@@ -106,6 +106,8 @@ def track(cameras: np.ndarray, points: np.ndarray, point: list[float] | None, at
     if pooled is not None and not math.isfinite(out.cost_increase):
         return no_level()
     out.level = None if pooled is None else pooled_level(pooled)
+    if pooled is not None:  # a pool of one 2-view track estimates the noise from one residual
+        out.warnings += few_degrees(pooled[1])
     out.proven_intervals = proven_track(sublevel)
     rays = X[None, :] - centres
     rays = rays[np.all(np.isfinite(rays), axis=1)]
@@ -313,8 +315,9 @@ def _finite_tracks(cameras, all_centres, tracks: list, X: np.ndarray, costs: np.
             documents.append(no_level())
             continue
         out = Determinacy(cost_increase=float(delta[i]), redundancy=redundancy, level=level)
-        if pooled is None:  # the track's own level, as track's (core.determinacy.information_intervals)
-            out.warnings += few_degrees(redundancy)
+        # the level's own degrees of freedom, as track's: the track's, or the pool's (a job of one
+        # 2-view track pools one: a lone point's noise estimate from its one residual, issue 37)
+        out.warnings += few_degrees(redundancy if pooled is None else pooled[1])
         scale = float(length[i]) if has_depth[i] else None
         for k in range(4 if has_depth[i] else 3):
             value = float(quantity[i, k])

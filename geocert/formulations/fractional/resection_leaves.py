@@ -28,7 +28,7 @@ import math
 
 import numpy as np
 
-from geocert.core.determinacy import SIGMAS, proven_document
+from geocert.core.determinacy import level_sigmas, proven_document
 from geocert.core.geometry import norm_cost
 from geocert.core.strict import Invalid, number, numbers, record
 from geocert.formulations.fractional.charts import MapChart
@@ -43,13 +43,18 @@ STATED_PAD = 1e-7  # the solver states its intervals this much wider (relative t
 
 def l1_cost_increase(norm: str, cost: float, points: int, gap: float | None) -> float:
     """The cost increase an L1 resection's intervals are proven at: the L1 counterpart of the
-    L2L2 level (SIGMAS^2 times the residual variance, at least the certified gap). Near the
-    optimum an L1 cost grows by the squared-residual increase times the noise density at 0:
+    L2L2 level (the squared level factor times the residual variance, at least the certified gap).
+    Near the optimum an L1 cost grows by the squared-residual increase times the noise density at 0:
     1 / (sigma sqrt(2 pi)) per coordinate (L1L1), sqrt(pi / 2) / (2 sigma) per point (L2L1);
-    with sigma estimated from the cost over 2k - 11 (respectively k - 5.5) residuals, SIGMAS^2
-    sigma^2 becomes SIGMAS^2 cost / (2 (2k - 11)) (L1L1) and SIGMAS^2 cost / (2k - 11) (L2L1)."""
+    with sigma estimated from the cost over 2k - 11 (respectively k - 5.5) residuals, s^2 sigma^2
+    becomes s^2 cost / (2 (2k - 11)) (L1L1) and s^2 cost / (2k - 11) (L2L1). The factor s is the
+    estimate's (level_sigmas of the 2k - 11 degrees of freedom: the Student quantile in the
+    estimates' form 2, SIGMAS in earlier forms, so a document of those is read at their level):
+    at SIGMAS whatever the degrees of freedom, 7-point resections of real cameras had proven centre
+    boxes missing the truth where the estimate beside them held it (issue 37)."""
     redundancy = 2 * points - 11
-    factor = SIGMAS ** 2 / 2 if norm == "L1L1" else SIGMAS ** 2
+    s2 = level_sigmas(redundancy) ** 2
+    factor = s2 / 2 if norm == "L1L1" else s2
     delta = factor * cost / redundancy if redundancy > 0 else 0.0
     if gap is not None and math.isfinite(gap):
         delta = max(delta, gap)
