@@ -43,7 +43,9 @@ from __future__ import annotations
 
 import base64
 import binascii
+import contextlib
 import math
+import os
 import struct
 import threading
 import time
@@ -599,6 +601,45 @@ def in_order_threads(function, items: list, stop) -> list | None:
     return pieces.in_threads(function, items, stop, FEATURE_THREADS)
 
 
+# OpenCV's own threads (its parallel_for in SIFT's blurs, extrema and descriptors) are off while the
+# stage's threads fill every processor: they only contend with the stage's other thread for the
+# same cores and spin waiting for work (about 0.1 to 0.25 s of CPU on templeSparseRing's stage,
+# more the busier the machine: bench/results/reconstruction_vs_colmap.md, "OpenCV's own threads
+# off during the features stage"). What OpenCV computes does not depend on its thread count (SIFT
+# sorts its keypoints before describing them). A process-wide setting: set by the first stage
+# running and put back by the last (stages of one process may overlap in threads).
+_OPENCV_LOCK = threading.Lock()
+_opencv_stages = 0
+_opencv_before = 1
+
+
+def _processors() -> int:
+    return os.cpu_count() or 1
+
+
+@contextlib.contextmanager
+def opencv_threads_off():
+    """Within the block, OpenCV runs each call in its caller's thread when the stage's
+    FEATURE_THREADS fill the processors (else its own threads are left as they are); the
+    setting before is put back when the last such block in the process ends."""
+    global _opencv_stages, _opencv_before
+    if _processors() > FEATURE_THREADS:
+        yield
+        return
+    with _OPENCV_LOCK:
+        if _opencv_stages == 0:
+            _opencv_before = cv2.getNumThreads()
+            cv2.setNumThreads(1)
+        _opencv_stages += 1
+    try:
+        yield
+    finally:
+        with _OPENCV_LOCK:
+            _opencv_stages -= 1
+            if _opencv_stages == 0:
+                cv2.setNumThreads(_opencv_before)
+
+
 _DETECTORS = threading.local()  # a detector per thread: OpenCV does not promise one is safe to share
 
 
@@ -635,8 +676,14 @@ def tracks_from_images(images: list[np.ndarray], options: FeatureOptions | None 
     ``callback(progress)`` gets {"stage": "features" | "matches", "done": k, "total": n} and may
     return True to stop (the result then has status "cancelled" and no tracks). Past
     ``options.time_limit_s`` the images not yet read and the pairs not yet matched are left out:
-    status "time_limit", ``stats["stopped"]`` says where."""
-    options = options or FeatureOptions()
+    status "time_limit", ``stats["stopped"]`` says where. OpenCV's own threads are off meanwhile
+    when the stage's fill the processors (opencv_threads_off)."""
+    with opencv_threads_off():
+        return _tracks(images, options or FeatureOptions(), callback)
+
+
+def _tracks(images: list[np.ndarray], options: FeatureOptions, callback) -> ImageTracks:
+    """tracks_from_images's work."""
     sizes = [(int(im.shape[1]), int(im.shape[0])) for im in images]  # grayscale or BGR uint8
     timing: dict[str, float] = {}
     stats: dict = {"images": len(images), "time_s": timing}
