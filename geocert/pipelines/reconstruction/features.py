@@ -53,6 +53,7 @@ from dataclasses import dataclass, field
 
 import cv2
 import numpy as np
+from scipy.linalg import blas
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
@@ -382,6 +383,16 @@ def build_tracks(pair_matches: dict[tuple[int, int], np.ndarray], features_per_v
     return kept, counts
 
 
+# Distance matrices of at least this many entries have their mutual test read from a product of
+# the candidate columns' descriptors with every row's (a few percent of the pair's product) rather
+# than gathered from the matrix: a column of a large matrix is read an entry per cache line. The
+# same numbers either way; which is cheaper depends on the caches. On kittiTurn's photos (about
+# 3,000 keypoints) the product is cheaper from 2,000 x 2,000 up, the gather below 1,400 x 1,400
+# (templeSparseRing's size): bench/results/reconstruction_vs_colmap.md, "The descriptor distances
+# with one pass fewer, and the mutual test of large pairs by a product".
+MUTUAL_BY_PRODUCT = 3_000_000
+
+
 def _match(desc_a: np.ndarray, desc_b: np.ndarray, options: FeatureOptions) -> np.ndarray:
     """Ratio-test (and mutual) matches as (m, 2) keypoint indices.
 
@@ -395,9 +406,32 @@ def _match(desc_a: np.ndarray, desc_b: np.ndarray, options: FeatureOptions) -> n
     # columns the mutual test reads), two passes over the matrix fewer. Every term is an integer
     # below 2^24 (see _squared_distances), so each distance is the same number either way.
     a, b = desc_a.astype(np.float32, copy=False), desc_b.astype(np.float32, copy=False)
-    partial = a @ (-2.0 * b).T
-    partial += np.einsum("ij,ij->i", b, b)[None, :]
-    return _ratio_matches(partial, options.ratio, options.mutual, np.einsum("ij,ij->i", a, a))
+    minus_2b = -2.0 * b
+    row_offset = np.einsum("ij,ij->i", a, a)
+    column_distances = None
+    if len(a) * len(b) >= MUTUAL_BY_PRODUCT:
+        def column_distances(columns: np.ndarray) -> np.ndarray:
+            # (columns, rows): the columns' squared distances to every row less the column's |b|^2
+            # (a constant down a column: the nearest row is the same)
+            read = minus_2b[columns] @ a.T
+            read += row_offset[None, :]
+            return read
+    return _ratio_matches(_partial_distances(a, minus_2b, np.einsum("ij,ij->i", b, b)), options.ratio,
+                          options.mutual, row_offset, column_distances)
+
+
+def _partial_distances(a: np.ndarray, minus_2b: np.ndarray, b_squared: np.ndarray) -> np.ndarray:
+    """(n_a, n_b) float32, C order: |b|^2 - 2 a.b, the squared distances less each row's |a|^2.
+
+    One product accumulated onto the |b|^2 rows (BLAS's sgemm with beta 1) rather than a product
+    then |b|^2 added: one pass over the matrix fewer. The sums are integers below 2^24 in any order
+    (see _squared_distances): the same numbers as the product and the addition."""
+    # Fortran's (n_b, n_a) is C's (n_a, n_b): BLAS fills it as op(A) op(B) with op(A) = minus_2b and
+    # op(B) = a^T, both read in place (their transposes are Fortran-ordered).
+    out = np.empty((len(minus_2b), len(a)), dtype=np.float32, order="F")
+    out[...] = b_squared[:, None]
+    out = blas.sgemm(1.0, minus_2b.T, a.T, beta=1.0, c=out, trans_a=1, overwrite_c=1)
+    return out.T
 
 
 def _squared_distances(desc_a: np.ndarray, desc_b: np.ndarray) -> np.ndarray:
@@ -411,11 +445,14 @@ def _squared_distances(desc_a: np.ndarray, desc_b: np.ndarray) -> np.ndarray:
     return np.maximum(d2, 0.0, out=d2)
 
 
-def _ratio_matches(d2: np.ndarray, ratio: float, mutual: bool, row_offset: np.ndarray | None = None) -> np.ndarray:
+def _ratio_matches(d2: np.ndarray, ratio: float, mutual: bool, row_offset: np.ndarray | None = None,
+                   column_distances=None) -> np.ndarray:
     """Each row's nearest column, kept when nearer than ``ratio`` times the second-nearest (a
     single column passes; an infinite distance, a pair not allowed, never does) and, with
     ``mutual``, when the two are each other's nearest. ``row_offset``: when given, the squared
-    distances are ``d2 + row_offset[:, None]`` (d2 then a row's distances less a constant)."""
+    distances are ``d2 + row_offset[:, None]`` (d2 then a row's distances less a constant).
+    ``column_distances(columns)``: when given, the mutual test reads the columns' distances from it,
+    (columns, rows), each column's less a constant, instead of from d2 (see MUTUAL_BY_PRODUCT)."""
     # Minima and argmins along rows, and minima along columns, are single passes over d2 (an
     # argpartition, or an argmin down the columns, costs as much as the distances themselves).
     rows = np.arange(d2.shape[0])
@@ -437,10 +474,13 @@ def _ratio_matches(d2: np.ndarray, ratio: float, mutual: bool, row_offset: np.nd
         # percent of them on real photos: a pass over d2's columns costs as much as the product).
         candidates = np.flatnonzero(keep)
         columns, which = np.unique(nearest[candidates], return_inverse=True)
-        read = d2[:, columns]
-        if row_offset is not None:
-            read += row_offset[:, None]
-        first_row = np.argmin(read, axis=0)
+        if column_distances is not None:
+            first_row = np.argmin(column_distances(columns), axis=1)
+        else:
+            read = d2[:, columns]
+            if row_offset is not None:
+                read += row_offset[:, None]
+            first_row = np.argmin(read, axis=0)
         keep[candidates] = first_row[which.ravel()] == candidates
     return np.c_[rows[keep], nearest[keep]].astype(np.int64)
 
