@@ -388,8 +388,8 @@ def build_tracks(pair_matches: dict[tuple[int, int], np.ndarray], features_per_v
 # than gathered from the matrix: a column of a large matrix is read an entry per cache line. The
 # same numbers either way; which is cheaper depends on the caches. On kittiTurn's photos (about
 # 3,000 keypoints) the product is cheaper from 2,000 x 2,000 up, the gather below 1,400 x 1,400
-# (templeSparseRing's size): bench/results/reconstruction_vs_colmap.md, "The descriptor distances
-# with one pass fewer, and the mutual test of large pairs by a product".
+# (templeSparseRing's size): bench/results/reconstruction_vs_colmap.md, "the features and matches
+# stage profiled again".
 MUTUAL_BY_PRODUCT = 3_000_000
 
 
@@ -643,11 +643,10 @@ def in_order_threads(function, items: list, stop) -> list | None:
 
 # OpenCV's own threads (its parallel_for in SIFT's blurs, extrema and descriptors) are off while the
 # stage's threads fill every processor: they only contend with the stage's other thread for the
-# same cores and spin waiting for work (about 0.1 to 0.25 s of CPU on templeSparseRing's stage,
-# more the busier the machine: bench/results/reconstruction_vs_colmap.md, "OpenCV's own threads
-# off during the features stage"). What OpenCV computes does not depend on its thread count (SIFT
-# sorts its keypoints before describing them). A process-wide setting: set by the first stage
-# running and put back by the last (stages of one process may overlap in threads).
+# same cores and spin waiting for work (measured in bench/results/reconstruction_vs_colmap.md,
+# "the features and matches stage profiled again"). What OpenCV computes does not depend on its
+# thread count (SIFT sorts its keypoints before describing them). A process-wide setting: set by
+# the first stage running and put back by the last (stages of one process may overlap in threads).
 _OPENCV_LOCK = threading.Lock()
 _opencv_stages = 0
 _opencv_before = 1
