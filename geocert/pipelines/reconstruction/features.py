@@ -43,7 +43,9 @@ from __future__ import annotations
 
 import base64
 import binascii
+import contextlib
 import math
+import os
 import struct
 import threading
 import time
@@ -51,6 +53,7 @@ from dataclasses import dataclass, field
 
 import cv2
 import numpy as np
+from scipy.linalg import blas
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
@@ -380,6 +383,16 @@ def build_tracks(pair_matches: dict[tuple[int, int], np.ndarray], features_per_v
     return kept, counts
 
 
+# Distance matrices of at least this many entries have their mutual test read from a product of
+# the candidate columns' descriptors with every row's (a few percent of the pair's product) rather
+# than gathered from the matrix: a column of a large matrix is read an entry per cache line. The
+# same numbers either way; which is cheaper depends on the caches. On kittiTurn's photos (about
+# 3,000 keypoints) the product is cheaper from 2,000 x 2,000 up, the gather below 1,400 x 1,400
+# (templeSparseRing's size): bench/results/reconstruction_vs_colmap.md, "the features and matches
+# stage profiled again".
+MUTUAL_BY_PRODUCT = 3_000_000
+
+
 def _match(desc_a: np.ndarray, desc_b: np.ndarray, options: FeatureOptions) -> np.ndarray:
     """Ratio-test (and mutual) matches as (m, 2) keypoint indices.
 
@@ -393,9 +406,32 @@ def _match(desc_a: np.ndarray, desc_b: np.ndarray, options: FeatureOptions) -> n
     # columns the mutual test reads), two passes over the matrix fewer. Every term is an integer
     # below 2^24 (see _squared_distances), so each distance is the same number either way.
     a, b = desc_a.astype(np.float32, copy=False), desc_b.astype(np.float32, copy=False)
-    partial = a @ (-2.0 * b).T
-    partial += np.einsum("ij,ij->i", b, b)[None, :]
-    return _ratio_matches(partial, options.ratio, options.mutual, np.einsum("ij,ij->i", a, a))
+    minus_2b = -2.0 * b
+    row_offset = np.einsum("ij,ij->i", a, a)
+    column_distances = None
+    if len(a) * len(b) >= MUTUAL_BY_PRODUCT:
+        def column_distances(columns: np.ndarray) -> np.ndarray:
+            # (columns, rows): the columns' squared distances to every row less the column's |b|^2
+            # (a constant down a column: the nearest row is the same)
+            read = minus_2b[columns] @ a.T
+            read += row_offset[None, :]
+            return read
+    return _ratio_matches(_partial_distances(a, minus_2b, np.einsum("ij,ij->i", b, b)), options.ratio,
+                          options.mutual, row_offset, column_distances)
+
+
+def _partial_distances(a: np.ndarray, minus_2b: np.ndarray, b_squared: np.ndarray) -> np.ndarray:
+    """(n_a, n_b) float32, C order: |b|^2 - 2 a.b, the squared distances less each row's |a|^2.
+
+    One product accumulated onto the |b|^2 rows (BLAS's sgemm with beta 1) rather than a product
+    then |b|^2 added: one pass over the matrix fewer. The sums are integers below 2^24 in any order
+    (see _squared_distances): the same numbers as the product and the addition."""
+    # Fortran's (n_b, n_a) is C's (n_a, n_b): BLAS fills it as op(A) op(B) with op(A) = minus_2b and
+    # op(B) = a^T, both read in place (their transposes are Fortran-ordered).
+    out = np.empty((len(minus_2b), len(a)), dtype=np.float32, order="F")
+    out[...] = b_squared[:, None]
+    out = blas.sgemm(1.0, minus_2b.T, a.T, beta=1.0, c=out, trans_a=1, overwrite_c=1)
+    return out.T
 
 
 def _squared_distances(desc_a: np.ndarray, desc_b: np.ndarray) -> np.ndarray:
@@ -409,11 +445,14 @@ def _squared_distances(desc_a: np.ndarray, desc_b: np.ndarray) -> np.ndarray:
     return np.maximum(d2, 0.0, out=d2)
 
 
-def _ratio_matches(d2: np.ndarray, ratio: float, mutual: bool, row_offset: np.ndarray | None = None) -> np.ndarray:
+def _ratio_matches(d2: np.ndarray, ratio: float, mutual: bool, row_offset: np.ndarray | None = None,
+                   column_distances=None) -> np.ndarray:
     """Each row's nearest column, kept when nearer than ``ratio`` times the second-nearest (a
     single column passes; an infinite distance, a pair not allowed, never does) and, with
     ``mutual``, when the two are each other's nearest. ``row_offset``: when given, the squared
-    distances are ``d2 + row_offset[:, None]`` (d2 then a row's distances less a constant)."""
+    distances are ``d2 + row_offset[:, None]`` (d2 then a row's distances less a constant).
+    ``column_distances(columns)``: when given, the mutual test reads the columns' distances from it,
+    (columns, rows), each column's less a constant, instead of from d2 (see MUTUAL_BY_PRODUCT)."""
     # Minima and argmins along rows, and minima along columns, are single passes over d2 (an
     # argpartition, or an argmin down the columns, costs as much as the distances themselves).
     rows = np.arange(d2.shape[0])
@@ -435,10 +474,13 @@ def _ratio_matches(d2: np.ndarray, ratio: float, mutual: bool, row_offset: np.nd
         # percent of them on real photos: a pass over d2's columns costs as much as the product).
         candidates = np.flatnonzero(keep)
         columns, which = np.unique(nearest[candidates], return_inverse=True)
-        read = d2[:, columns]
-        if row_offset is not None:
-            read += row_offset[:, None]
-        first_row = np.argmin(read, axis=0)
+        if column_distances is not None:
+            first_row = np.argmin(column_distances(columns), axis=1)
+        else:
+            read = d2[:, columns]
+            if row_offset is not None:
+                read += row_offset[:, None]
+            first_row = np.argmin(read, axis=0)
         keep[candidates] = first_row[which.ravel()] == candidates
     return np.c_[rows[keep], nearest[keep]].astype(np.int64)
 
@@ -599,6 +641,44 @@ def in_order_threads(function, items: list, stop) -> list | None:
     return pieces.in_threads(function, items, stop, FEATURE_THREADS)
 
 
+# OpenCV's own threads (its parallel_for in SIFT's blurs, extrema and descriptors) are off while the
+# stage's threads fill every processor: they only contend with the stage's other thread for the
+# same cores and spin waiting for work (measured in bench/results/reconstruction_vs_colmap.md,
+# "the features and matches stage profiled again"). What OpenCV computes does not depend on its
+# thread count (SIFT sorts its keypoints before describing them). A process-wide setting: set by
+# the first stage running and put back by the last (stages of one process may overlap in threads).
+_OPENCV_LOCK = threading.Lock()
+_opencv_stages = 0
+_opencv_before = 1
+
+
+def _processors() -> int:
+    return os.cpu_count() or 1
+
+
+@contextlib.contextmanager
+def opencv_threads_off():
+    """Within the block, OpenCV runs each call in its caller's thread when the stage's
+    FEATURE_THREADS fill the processors (else its own threads are left as they are); the
+    setting before is put back when the last such block in the process ends."""
+    global _opencv_stages, _opencv_before
+    if _processors() > FEATURE_THREADS:
+        yield
+        return
+    with _OPENCV_LOCK:
+        if _opencv_stages == 0:
+            _opencv_before = cv2.getNumThreads()
+            cv2.setNumThreads(1)
+        _opencv_stages += 1
+    try:
+        yield
+    finally:
+        with _OPENCV_LOCK:
+            _opencv_stages -= 1
+            if _opencv_stages == 0:
+                cv2.setNumThreads(_opencv_before)
+
+
 _DETECTORS = threading.local()  # a detector per thread: OpenCV does not promise one is safe to share
 
 
@@ -635,8 +715,14 @@ def tracks_from_images(images: list[np.ndarray], options: FeatureOptions | None 
     ``callback(progress)`` gets {"stage": "features" | "matches", "done": k, "total": n} and may
     return True to stop (the result then has status "cancelled" and no tracks). Past
     ``options.time_limit_s`` the images not yet read and the pairs not yet matched are left out:
-    status "time_limit", ``stats["stopped"]`` says where."""
-    options = options or FeatureOptions()
+    status "time_limit", ``stats["stopped"]`` says where. OpenCV's own threads are off meanwhile
+    when the stage's fill the processors (opencv_threads_off)."""
+    with opencv_threads_off():
+        return _tracks(images, options or FeatureOptions(), callback)
+
+
+def _tracks(images: list[np.ndarray], options: FeatureOptions, callback) -> ImageTracks:
+    """tracks_from_images's work."""
     sizes = [(int(im.shape[1]), int(im.shape[0])) for im in images]  # grayscale or BGR uint8
     timing: dict[str, float] = {}
     stats: dict = {"images": len(images), "time_s": timing}

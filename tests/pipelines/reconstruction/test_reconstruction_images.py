@@ -356,10 +356,14 @@ def test_ratio_matches_follow_their_definition(seed):
             assert found.tolist() == _ratio_matches_row_by_row(d2, ratio, mutual)
 
 
+@pytest.mark.parametrize("mutual_by_product", [False, True])
 @pytest.mark.parametrize("seed", range(12))
-def test_matches_are_the_brute_force_mutual_ratio_matches(seed):
+def test_matches_are_the_brute_force_mutual_ratio_matches(seed, mutual_by_product, monkeypatch):
     # Integer descriptors as SIFT's: few levels in few dimensions make equal distances common
     # (a row's nearest two, and several rows nearest to one column); 0..255 in 128 as real ones.
+    # The mutual test read from the matrix and from the candidate columns' own product (large
+    # pairs: features.MUTUAL_BY_PRODUCT), ties included.
+    monkeypatch.setattr(features, "MUTUAL_BY_PRODUCT", 0 if mutual_by_product else 10 ** 12)
     rng = np.random.default_rng(seed)
     levels, dims = ((3, 6), (256, 128))[seed % 2]
     a = rng.integers(0, levels, size=(rng.integers(2, 60), dims)).astype(np.float32)
@@ -369,6 +373,33 @@ def test_matches_are_the_brute_force_mutual_ratio_matches(seed):
         for mutual in (True, False):
             found = features._match(a, b, FeatureOptions(ratio=ratio, mutual=mutual))
             assert found.tolist() == _ratio_matches_row_by_row(d2, ratio, mutual)
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_partial_distances_are_exact(seed):
+    """|b|^2 - 2 a.b accumulated by BLAS onto the |b|^2 rows is, plus |a|^2, every squared distance
+    exactly (float64 brute force), descriptors at OpenCV's extremes (every entry 0 or 255) included:
+    every partial sum is an integer below 2^24."""
+    rng = np.random.default_rng(seed)
+    a = rng.integers(0, 256, size=(rng.integers(2, 300), 128)).astype(np.float32)
+    b = rng.integers(0, 256, size=(rng.integers(2, 300), 128)).astype(np.float32)
+    a[0], b[0], b[1] = 255.0, 255.0, 0.0
+    partial = features._partial_distances(a, -2.0 * b, np.einsum("ij,ij->i", b, b))
+    assert partial.dtype == np.float32 and partial.flags.c_contiguous and partial.shape == (len(a), len(b))
+    exact = ((a[:, None, :].astype(np.float64) - b[None, :, :]) ** 2).sum(axis=2)
+    assert np.array_equal(partial.astype(np.float64) + (a.astype(np.float64) ** 2).sum(axis=1)[:, None], exact)
+
+
+def test_large_pairs_mutual_test_by_product_gives_the_same_matches(box, monkeypatch):
+    """On SIFT's descriptors of the box's views, the mutual test read from the candidate columns'
+    product gives the matrix's matches, pair for pair."""
+    found = [features.image_features(FeatureOptions(), image) for image in box[1][:4]]
+    for i, j in [(0, 1), (0, 2), (1, 3), (2, 3)]:
+        monkeypatch.setattr(features, "MUTUAL_BY_PRODUCT", 10 ** 12)
+        gathered = features._match(found[i][1], found[j][1], FeatureOptions())
+        monkeypatch.setattr(features, "MUTUAL_BY_PRODUCT", 0)
+        by_product = features._match(found[i][1], found[j][1], FeatureOptions())
+        assert len(gathered) > 50 and np.array_equal(gathered, by_product)
 
 
 class TestGuidedMatching:
