@@ -283,7 +283,8 @@ class AutocalibrationVerification(Verification):
             estimates.check_proven_reason(
                 stage.get("determinacy"), f"stages/{index}/determinacy", asked,
                 proven_reasons.DIRECT if direct else proven_reasons.STRATIFIED, options.get("certificate") == "full",
-                claim.get("certified") is True and isinstance(claim.get("proof"), dict), stage.get("status"))
+                claim.get("certified") is True and isinstance(claim.get("proof"), dict), stage.get("status"),
+                _reason_fields(options, stage, direct))
             summary = stage.get("certificate")
             if claim.get("certified") is True and isinstance(summary, dict) and "scope" in summary \
                     and summary["scope"] != STAGE_SCOPES[names[index]]:
@@ -812,6 +813,24 @@ def _check_nothing_direct(result: dict, stages: list) -> None:
     if result.get("Ks") is not None:
         raise Invalid("returned", "Ks is stated: the stratified method returns one K (K), a K a view only the direct "
                                   "method's options.varying_focal writes")
+
+
+def _reason_fields(options: dict, stage: dict, direct: bool) -> dict:
+    """What a stage's proof reason may say (estimates.check_reason_fields), from the options and the
+    stage as its writer reads them (kinds.direct_autocalibration._prove_focal: what and after;
+    kinds.autocalibration._prove_intervals: the level)."""
+    limit = options.get("time_limit_s")
+    limit = float(limit) if is_number(limit) and limit >= 0 else math.inf
+    if direct:
+        varying = bool(options.get("varying_focal"))
+        return {"what": proven_reasons.WHAT[1] if varying else proven_reasons.WHAT[0],
+                "after": proven_reasons.AFTER[1] if options.get("prove_intrinsics_intervals") and not varying
+                else proven_reasons.AFTER[0],
+                "seconds": limit + proven_reasons.ANALYSIS_GRACE_S}
+    determinacy = stage.get("determinacy") if isinstance(stage, dict) else None
+    return {"seconds": min(limit, proven_reasons.METRIC_PROOF_S),
+            "level": isinstance(determinacy, dict) and is_number(stage.get("cost"))
+            and is_number(determinacy.get("cost_increase"))}
 
 
 def _check_calibration_forms(result: dict) -> None:

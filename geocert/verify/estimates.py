@@ -144,7 +144,7 @@ def check_determined(determinacy: dict, where: str, earlier: bool = True) -> Non
 
 
 def check_proven_reason(determinacy: Any, where: str, asked: bool, keys: tuple[str, ...], full: bool,
-                        proved: bool, status: Any) -> None:
+                        proved: bool, status: Any, own: dict | None = None) -> None:
     """A stage's ``proven_reason`` (why its proven intervals, asked for, are null) is its writer's:
     stated only where the options asked for a proof (``asked``: the stratified metric stage's with a
     full certificate, kinds.autocalibration; the direct stage's with prove_focal_interval or
@@ -153,7 +153,8 @@ def check_proven_reason(determinacy: Any, where: str, asked: bool, keys: tuple[s
     stage has no proof (``proved``: certified with a proof), exactly the one
     autocalibration_stages.unproven gives (the stage's own status); else one of the proof's own.
     A text reading as a proof ("proven: every intrinsic within 0.01%") is refused (review 63
-    class 2). A reason left out is not required (documents written before it was stated)."""
+    class 2). A reason left out is not required (documents written before it was stated). ``own``:
+    what the stage's options and figures give of a proof's reason (check_reason_fields)."""
     reason = determinacy.get("proven_reason") if isinstance(determinacy, dict) else None
     if reason is None:
         return
@@ -169,11 +170,35 @@ def check_proven_reason(determinacy: Any, where: str, asked: bool, keys: tuple[s
         expected = (proven_reasons.reason("not_certified", status=status),) if isinstance(status, str) else ()
     else:
         expected = None
-    if expected is not None and reason not in expected or expected is None and proven_reasons.is_reason(
-            reason, tuple(k for k in keys if k not in ("not_full", "not_certified"))) is None:
+    key = None if expected is not None else proven_reasons.is_reason(
+        reason, tuple(k for k in keys if k not in ("not_full", "not_certified")))
+    if expected is not None and reason not in expected or expected is None and key is None:
         raise Invalid("returned", f"{where}/proven_reason is {reason!r:.80}: not its writer's reason for this stage "
                                   "(core.proven_reasons: a full certificate's certified stage states why its proof "
                                   "found nothing; any other stage, why there is no proof to read)")
+    if key is not None and own is not None:
+        check_reason_fields(reason, key, own, where)
+
+
+def check_reason_fields(reason: str, key: str, own: dict, where: str) -> None:
+    """A proof's reason says of its proof only what the options and the stage give (review 64): the
+    proof it names (``what``: each view's focal length exactly with varying_focal) and whether the
+    other intrinsics' proofs were asked for (``after``: prove_intrinsics_intervals, one K), words
+    its writer takes from the options; its seconds no more than the search could have (``seconds``:
+    the stratified search's least of the time limit and METRIC_PROOF_S, the direct proof's time
+    limit and grace, to the rounding of "{:.3g}"); and ``metric_no_level`` only where the stage
+    states no cost or no cost increase (``level``: it states both), its writer's condition."""
+    found = proven_reasons.fields(reason, key)
+    for name in ("what", "after"):
+        if name in found and name in own and found[name] != own[name]:
+            raise Invalid("returned", f"{where}/proven_reason names {found[name]!r:.80} where its writer, from the "
+                                      f"options, names {own[name]!r:.80}")
+    if "seconds" in found and "seconds" in own and not float(found["seconds"]) <= own["seconds"] * (1.0 + 5e-3):
+        raise Invalid("returned", f"{where}/proven_reason states {found['seconds']} s; its proof ran at most "
+                                  f"{own['seconds']:.6g} s under the options")
+    if key == "metric_no_level" and own.get("level"):
+        raise Invalid("returned", f"{where}/proven_reason says the stage states no cost or no cost increase; it "
+                                  "states both")
 
 
 INTRINSICS = ("focal_x", "focal_y", "skew", "principal_u", "principal_v")  # autocalibration.determinacy.NAMES

@@ -1,0 +1,98 @@
+"""Review 64: a hostile review of the trust boundary after review 63's fixes (issue 33): the
+proof reasons' table (core.proven_reasons, estimates.check_proven_reason), the estimates' form 2
+and its rules, and the fields no check ties to the certificate.
+
+Found (each test failed on the code before its fix):
+
+1. A proof's reason in its writer's words says what the options and the stage deny: the stored
+   stratified document's metric stage (time limit 60 s) verified "the search for K's intervals
+   proved none within its 1e+09 s" (the search runs at most the least of the time limit and 20 s)
+   and "the stage states no cost or no cost increase" beside a cost 2.2e-12 and a cost increase
+   1.0e-12; a direct stage solved with one K and both proofs asked verified a reason naming "each
+   view's focal length" (varying_focal false), one leaving out that the other intrinsics' proofs
+   were asked for, and "ran out 1e+09 s into the proof" under a 3600 s limit. The pattern
+   (proven_reasons.is_reason) held each field only to its kind. Fixed: estimates.
+   check_reason_fields holds what and after to the options, the seconds to the search's bound
+   (the direct writer now states where the limit ran out, its deadline less the proof's start,
+   not when a check noticed it), and metric_no_level to its writer's condition.
+"""
+
+from __future__ import annotations
+
+import copy
+import json
+
+import pytest
+
+from geocert.core import proven_reasons
+from geocert.verify.checks import verify_any
+from tests.verify.test_forgeries import stored
+
+pytestmark = pytest.mark.filterwarnings("ignore")
+
+
+def _report(document: dict):
+    return verify_any(json.loads(json.dumps(document)))
+
+
+def _refused_for_reason(document: dict) -> bool:
+    report = _report(document)
+    return not report.valid and "proven_reason" in report.first_failure["detail"]
+
+
+# 1. A proof's reason whose fields the options and the stage deny
+
+def _stratified_with_reason(text: str) -> dict:
+    document = stored("autocalibration_stratified")  # a full certificate, time_limit_s 60
+    document["stages"][1]["determinacy"]["proven_reason"] = text
+    return document
+
+
+def test_a_stratified_reason_within_its_search_bound_verifies():
+    assert _report(_stratified_with_reason(proven_reasons.reason("metric_none", seconds=20))).valid
+
+
+@pytest.mark.parametrize("text", [
+    proven_reasons.reason("metric_none", seconds=1e9),  # the search runs at most min(60, 20) s
+    proven_reasons.reason("metric_none", seconds=21),
+    proven_reasons.reason("metric_no_level"),  # the stage states a cost and a cost increase
+])
+def test_a_stratified_reason_the_stage_denies_is_refused(text):
+    determinacy = stored("autocalibration_stratified")["stages"][1]["determinacy"]
+    assert determinacy["cost_increase"] > 0
+    assert _refused_for_reason(_stratified_with_reason(text))
+
+
+@pytest.fixture(scope="module")
+def direct_stopped() -> dict:
+    """One K, both proofs asked, time_limit_s 3600: the focal proof stopped by the deadline at once
+    (tests/kinds/test_direct_proven_reason's scene)."""
+    from geocert.solvers.autocalibration import direct_solve
+    from tests.kinds.test_direct_proven_reason import solved
+
+    def at_the_deadline(*args, **kwargs):
+        raise direct_solve.Stopped("time_limit", "the job's deadline")
+
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setattr(direct_solve, "prove_focal", at_the_deadline)
+        return solved(certificate="full")
+
+
+def test_the_direct_writers_stopped_reason_states_its_deadline_and_verifies(direct_stopped):
+    reason = direct_stopped["stages"][0]["determinacy"]["proven_reason"]
+    seconds = float(proven_reasons.fields(reason, "direct_stopped")["seconds"])
+    assert 3500 < seconds <= 3602 * 1.005, reason  # the limit and grace less the solve's seconds
+    assert _report(direct_stopped).valid
+
+
+@pytest.mark.parametrize("key,fields", [
+    ("direct_none", {"what": proven_reasons.WHAT[1], "after": proven_reasons.AFTER[1]}),  # not varying_focal
+    ("direct_failed", {"what": proven_reasons.WHAT[0], "after": "", "error": "LinAlgError"}),  # intrinsics asked
+    ("direct_stopped", {"what": proven_reasons.WHAT[0], "after": proven_reasons.AFTER[1], "seconds": 1e9}),
+])
+def test_a_direct_reason_the_options_deny_is_refused(direct_stopped, key, fields):
+    options = direct_stopped["certificate"]["options"]
+    assert options["varying_focal"] is False and options["prove_intrinsics_intervals"] is True
+    forged = copy.deepcopy(direct_stopped)
+    forged["stages"][0]["determinacy"]["proven_reason"] = proven_reasons.reason(key, **fields)
+    assert _refused_for_reason(forged)
