@@ -29,8 +29,8 @@ from typing import Any
 
 import numpy as np
 
-from geocert.core.determinacy import (NO_REDUNDANCY_FORM, OWN_SCALE_FORM, Determinacy, certified_gap,
-                                      cost_increase as level_of, fixes, form, level_sigmas, safely)
+from geocert.core.determinacy import (FEWEST_DEGREES, NO_REDUNDANCY_FORM, OWN_SCALE_FORM, STUDENT_FORM, Determinacy,
+                                      certified_gap, cost_increase as level_of, fixes, form, level_sigmas, safely)
 from geocert.core import proven_reasons
 from geocert.core.geometry import is_number, normalised_cameras
 from geocert.core.warning_codes import MOTION_CODES
@@ -215,6 +215,22 @@ def check_redundancy(determinacy: Any, expected: int, where: str) -> None:
     if not same(determinacy.get("redundancy"), expected):
         raise Invalid("returned", f"{where}/redundancy is {determinacy.get('redundancy')!r:.30}; the stage's "
                                   f"residuals beyond its parameters number {expected!r}")
+    check_few_degrees(determinacy, expected, where)
+
+
+def check_few_degrees(determinacy: dict, redundancy: int, where: str) -> None:
+    """In today's form (STUDENT_FORM on) a stage whose level is read off fewer than FEWEST_DEGREES
+    degrees of freedom of its own (the affine stage's modulus constraints of five views) states
+    ``few_degrees_of_freedom``, as its writer does (core.determinacy.few_degrees, from every
+    curvature estimate): without it the stage could claim ``determined`` from a noise estimated
+    from one residual (review 64: five views at 0.001, the affine stage restated determined)."""
+    if form() < STUDENT_FORM or not 0 < redundancy < FEWEST_DEGREES:
+        return
+    warnings = determinacy.get("warnings")
+    codes = [w.get("code") for w in warnings if isinstance(w, dict)] if isinstance(warnings, list) else []
+    if "few_degrees_of_freedom" not in codes:
+        raise Invalid("returned", f"{where}/warnings state no few_degrees_of_freedom: the stage's level is read off "
+                                  f"{redundancy} degree of freedom, which its writer warns of")
 
 
 def check_no_redundancy(determinacy: Any, redundancy: int, where: str) -> None:

@@ -15,6 +15,12 @@ Found (each test failed on the code before its fix):
    check_reason_fields holds what and after to the options, the seconds to the search's bound
    (the direct writer now states where the limit ran out, its deadline less the proof's start,
    not when a check noticed it), and metric_no_level to its writer's condition.
+2. ``few_degrees_of_freedom`` dropped from an autocalibration stage verified: five views at 0.001
+   px (seed 2) give an affine stage of redundancy 1 whose only warning is few_degrees_of_freedom
+   (a noise level read off one residual); without it, and restated determined (its four plane
+   intervals bounded), it verified. The verifier compared no stage's warnings with its level's
+   degrees of freedom (only no_redundancy's 0, check_no_redundancy). Fixed: estimates.
+   check_few_degrees, from the redundancy check_redundancy ties to the number of views, in form 2.
 """
 
 from __future__ import annotations
@@ -96,3 +102,27 @@ def test_a_direct_reason_the_options_deny_is_refused(direct_stopped, key, fields
     forged = copy.deepcopy(direct_stopped)
     forged["stages"][0]["determinacy"]["proven_reason"] = proven_reasons.reason(key, **fields)
     assert _refused_for_reason(forged)
+
+
+# 2. few_degrees_of_freedom dropped from an autocalibration stage
+
+@pytest.mark.slow  # the solve: about 20 s of CPU
+def test_an_affine_stage_of_one_degree_of_freedom_restated_determined_is_refused():
+    from geocert.core.determinacy import fixes
+    from geocert.jobs.runner import solve_job
+    from geocert.solvers.autocalibration import scenes
+
+    scene = scenes.make_scene(5, 0.001, seed=2)
+    genuine = json.loads(json.dumps(solve_job({"kind": "autocalibration", "data": scene.job_data(),
+                                               "options": {"time_limit_s": 60, "certificate": "full",
+                                                           "method": "stratified"}})))
+    affine = genuine["stages"][0]["determinacy"]
+    assert affine["redundancy"] == 1 and [w["code"] for w in affine["warnings"]] == ["few_degrees_of_freedom"]
+    assert _report(genuine).valid
+    forged = copy.deepcopy(genuine)
+    affine = forged["stages"][0]["determinacy"]
+    affine["warnings"] = []
+    affine["determined"] = all(fixes(i) for i in affine["intervals"])
+    assert affine["determined"]
+    report = _report(forged)
+    assert not report.valid and "few_degrees_of_freedom" in report.first_failure["detail"], report.first_failure
