@@ -21,6 +21,14 @@ Found (each test failed on the code before its fix):
    intervals bounded), it verified. The verifier compared no stage's warnings with its level's
    degrees of freedom (only no_redundancy's 0, check_no_redundancy). Fixed: estimates.
    check_few_degrees, from the redundancy check_redundancy ties to the number of views, in form 2.
+3. A track's, map's or frame's estimate replaced by a stopped one (core.determinacy.not_analysed:
+   no interval, not determined) whose code is ``time_limit`` verified on the stored
+   triangulation, resection, homography and bilinear documents (each item replaced determined),
+   and a bilinear frame's ``not_analysed`` too: review 63 refused a map's not_analysed and judged
+   a track's, and left the clock's code unjudged, though no clock stops these analyses (only the
+   autocalibration stages' run under core.determinacy.within). The reason is false and the
+   item's intervals and warnings hidden. Fixed: estimates._refuse_clock for tracks, maps and
+   frames; a frame's not_analysed refused as a map's.
 """
 
 from __future__ import annotations
@@ -126,3 +134,18 @@ def test_an_affine_stage_of_one_degree_of_freedom_restated_determined_is_refused
     assert affine["determined"]
     report = _report(forged)
     assert not report.valid and "few_degrees_of_freedom" in report.first_failure["detail"], report.first_failure
+
+
+# 3. A track's, map's or frame's estimate stated stopped by a clock no writer runs
+
+@pytest.mark.parametrize("name,member", [("triangulation_l2l2", "tracks"), ("resection_l2l2", "maps"),
+                                         ("homography2_l2l2", "maps"), ("bilinear_l2l2", "frames")])
+@pytest.mark.parametrize("code", ["time_limit", "not_analysed"])
+def test_an_estimate_stated_stopped_where_its_writer_analyses_is_refused(name, member, code):
+    from geocert.core.determinacy import not_analysed
+
+    forged = stored(name)
+    assert forged[member][0]["determinacy"]["determined"] is True
+    forged[member][0]["determinacy"] = not_analysed("the estimate", "its clock ran out", code)
+    report = _report(forged)
+    assert not report.valid and f"{member}/0/determinacy" in report.first_failure["detail"], report.first_failure
