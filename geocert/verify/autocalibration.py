@@ -275,6 +275,7 @@ class AutocalibrationVerification(Verification):
         for index, (stage, claim) in enumerate(zip(stages, claims)):
             # every stage's estimate, analysed or stopped, certified or not, in its writer's words
             estimates.check_stage_words(stage.get("determinacy"), f"stages/{index}/determinacy")
+            estimates.check_defeated(stage.get("determinacy"), f"stages/{index}/determinacy")
             # why proven intervals asked for are null: the stage the writer proves (the metric or
             # the direct one), when the options asked, in its words (removed by estimates_of)
             options = certificate["options"]

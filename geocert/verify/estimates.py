@@ -397,6 +397,21 @@ def check_stage_words(determinacy: Any, where: str) -> None:
                                       f"its writer's {words!r:.60}")
 
 
+def check_defeated(determinacy: Any, where: str) -> None:
+    """An autocalibration stage stated not analysed because the data defeated its linear algebra
+    (a ``not_analysed`` first warning, no interval) is its writer's only beside the critical
+    motion it judged at the returned K (autocalibration.determinacy.with_motion): a failed analysis
+    with no motion to state is written null. Without one, the reason is no writer's, and it hid a
+    determined stage's intervals and warnings (review 64 class 5: a metric stage of five views so
+    restated verified)."""
+    if not isinstance(determinacy, dict) or not stopped(determinacy):
+        return
+    if determinacy["warnings"][0].get("code") == "not_analysed" and len(determinacy["warnings"]) == 1:
+        raise Invalid("returned", f"{where} is stated not analysed (the data defeated its linear algebra) with no "
+                                  "critical motion after it: its writer states that only beside the motion it judged, "
+                                  "and null otherwise")
+
+
 def check_pool(determinacy: Any, where: str) -> None:
     """An estimate no writer pools (a map's, a frame's, an autocalibration stage's: only a
     triangulation track's level is pooled over the job's tracks) names no pooled_tracks: one would

@@ -37,6 +37,14 @@ Found (each test failed on the code before its fix):
    indices, all documented as informational or unchecked). Their writers state a reason only
    for an item they do not certify. Fixed: checks.REASONLESS_WHEN_CERTIFIED (tracks, maps,
    frames); an uncertified item's reason stays informational (docs/certificate.md).
+5. An autocalibration stage stated not analysed because "the data defeated its linear algebra"
+   (code ``not_analysed``, no interval) with no critical motion after it verified: the five
+   views' metric stage (determined, no warning), either stage of it, and the direct stage of
+   class 1's scene. Its writer (autocalibration.determinacy.with_motion) states that code only
+   beside the motion it judged; a failed analysis with none is written null. Fixed: estimates.
+   check_defeated. (The same code beside a critical motion, and ``time_limit``, are left to the
+   writer's word: telling its analysis failed would need the analysis made again, whose
+   linear algebra may fail on one machine and not another; the motion stays required.)
 """
 
 from __future__ import annotations
@@ -122,17 +130,24 @@ def test_a_direct_reason_the_options_deny_is_refused(direct_stopped, key, fields
 
 # 2. few_degrees_of_freedom dropped from an autocalibration stage
 
-def test_an_affine_stage_of_one_degree_of_freedom_restated_determined_is_refused():
-    """The affine search ends at its node limit (300 nodes, about 2 s; no clock decides it), the
-    metric stage certified; the affine stage's estimate is stated whether or not it is certified."""
-    from geocert.core.determinacy import fixes
+@pytest.fixture(scope="module")
+def five_views() -> dict:
+    """Five views at 0.001 (seed 2): the affine search ends at its node limit (300 nodes, about
+    2 s; no clock decides it), the metric stage certified with no warning; the affine stage's
+    estimate is stated whether or not it is certified."""
     from geocert.jobs.runner import solve_job
     from geocert.solvers.autocalibration import scenes
 
     scene = scenes.make_scene(5, 0.001, seed=2)
-    genuine = json.loads(json.dumps(solve_job({"kind": "autocalibration", "data": scene.job_data(),
-                                               "options": {"time_limit_s": 600, "max_nodes": 300,
-                                                           "certificate": "full", "method": "stratified"}})))
+    return json.loads(json.dumps(solve_job({"kind": "autocalibration", "data": scene.job_data(),
+                                            "options": {"time_limit_s": 600, "max_nodes": 300,
+                                                        "certificate": "full", "method": "stratified"}})))
+
+
+def test_an_affine_stage_of_one_degree_of_freedom_restated_determined_is_refused(five_views):
+    from geocert.core.determinacy import fixes
+
+    genuine = five_views
     affine = genuine["stages"][0]["determinacy"]
     assert affine["redundancy"] == 1 and [w["code"] for w in affine["warnings"]] == ["few_degrees_of_freedom"]
     assert _report(genuine).valid
@@ -170,3 +185,32 @@ def test_a_certified_items_reason_is_refused(name, member):
     forged[member][0]["reason"] = "not certified: the search stopped at its node limit; this point is not optimal"
     report = _report(forged)
     assert not report.valid and f"{member}/0/reason" in report.first_failure["detail"], report.first_failure
+
+
+# 5. An autocalibration stage stated defeated by the data with no motion to state
+
+@pytest.mark.parametrize("stage", [0, 1])
+def test_a_stratified_stage_stated_defeated_without_a_motion_is_refused(five_views, stage):
+    from geocert.core.determinacy import not_analysed
+
+    assert _report(five_views).valid
+    forged = copy.deepcopy(five_views)
+    determinacy = forged["stages"][stage]["determinacy"]
+    assert not [w for w in determinacy["warnings"] if w["code"] != "few_degrees_of_freedom"]  # no motion
+    forged["stages"][stage]["determinacy"] = not_analysed("the stage's determinacy",
+                                                          "the data defeated its linear algebra", "not_analysed")
+    report = _report(forged)
+    assert not report.valid and "not analysed" in report.first_failure["detail"], report.first_failure
+
+
+def test_the_direct_stage_stated_defeated_without_a_motion_is_refused(direct_stopped):
+    from geocert.core.determinacy import not_analysed
+
+    forged = copy.deepcopy(direct_stopped)
+    determinacy = forged["stages"][0]["determinacy"]
+    assert determinacy["intervals"] and determinacy["warnings"] == []
+    forged["stages"][0]["determinacy"] = {
+        **not_analysed("the direct stage's determinacy", "the data defeated its linear algebra", "not_analysed"),
+        "proven_reason": determinacy["proven_reason"]}
+    report = _report(forged)
+    assert not report.valid and "not analysed" in report.first_failure["detail"], report.first_failure
