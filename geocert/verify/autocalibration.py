@@ -291,6 +291,8 @@ class AutocalibrationVerification(Verification):
                     and summary["scope"] != STAGE_SCOPES[names[index]]:
                 raise Invalid("returned", f"stages/{index}/certificate/scope is {summary['scope']!r:.120}, the scope its "
                                           f"proof covers is {STAGE_SCOPES[names[index]]!r:.120}")
+            if claim.get("certified") is not True and isinstance(summary, dict):
+                _check_uncertified_summary(summary, names[index], f"stages/{index}/certificate")
         _check_calibration_forms(result)
         if direct:
             if result.get("baseline") is not None:  # the direct method has no linear estimate
@@ -814,6 +816,20 @@ def _check_nothing_direct(result: dict, stages: list) -> None:
     if result.get("Ks") is not None:
         raise Invalid("returned", "Ks is stated: the stratified method returns one K (K), a K a view only the direct "
                                   "method's options.varying_focal writes")
+
+
+def _check_uncertified_summary(summary: dict, name: str, where: str) -> None:
+    """An uncertified stage's summary says what its search covered in its writer's words (the
+    stage's scope, or none: "" where the metric stage never ran, kinds.autocalibration) and its
+    tolerance is null or a number at least 0, as an uncertified track's or map's (docs/certificate.md):
+    "every plane at infinity chirality allows (proven)" and a tolerance of -1 verified on a stage
+    no proof backs (review 64 class 6)."""
+    if "scope" in summary and summary["scope"] not in (STAGE_SCOPES[name], ""):
+        raise Invalid("returned", f"{where}/scope is {summary['scope']!r:.120}: an uncertified stage states its "
+                                  f"search's words, {STAGE_SCOPES[name]!r:.80}, or none")
+    tolerance = summary.get("tolerance")
+    if tolerance is not None and not (is_number(tolerance) and tolerance >= 0):
+        raise Invalid("returned", f"{where}/tolerance is {tolerance!r:.40}: null or a number at least 0")
 
 
 def _reason_fields(options: dict, stage: dict, direct: bool) -> dict:

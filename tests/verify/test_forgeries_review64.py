@@ -45,6 +45,12 @@ Found (each test failed on the code before its fix):
    check_defeated. (The same code beside a critical motion, and ``time_limit``, are left to the
    writer's word: telling its analysis failed would need the analysis made again, whose
    linear algebra may fail on one machine and not another; the motion stays required.)
+6. An uncertified autocalibration stage's summary took any scope and tolerance: the five views'
+   affine stage (stopped at its node limit) verified with the scope "every plane at infinity
+   chirality allows (proven)" and a tolerance of -1, where an uncertified track's or map's
+   states its search's words and a tolerance at least 0. Only a certified stage's scope was
+   held to the kind's words (review 15). Fixed: autocalibration._check_uncertified_summary (the
+   stage's words, or "" where the metric stage never ran; null or a tolerance at least 0).
 """
 
 from __future__ import annotations
@@ -214,3 +220,17 @@ def test_the_direct_stage_stated_defeated_without_a_motion_is_refused(direct_sto
         "proven_reason": determinacy["proven_reason"]}
     report = _report(forged)
     assert not report.valid and "not analysed" in report.first_failure["detail"], report.first_failure
+
+
+# 6. An uncertified stage's summary: its scope and tolerance
+
+@pytest.mark.parametrize("member,value", [("scope", "every plane at infinity chirality allows (proven)"),
+                                          ("tolerance", -1.0)])
+def test_an_uncertified_stages_summary_claiming_more_is_refused(five_views, member, value):
+    forged = copy.deepcopy(five_views)
+    stage = forged["stages"][0]
+    assert stage["certified"] is False and stage["certificate"]["scope"] == "every plane at infinity chirality allows"
+    stage["certificate"][member] = value
+    report = _report(forged)
+    assert not report.valid and f"stages/0/certificate/{member}" in report.first_failure["detail"], \
+        report.first_failure
