@@ -2,6 +2,31 @@
 proof reasons' table (core.proven_reasons, estimates.check_proven_reason), the estimates' form 2
 and its rules, and the fields no check ties to the certificate.
 
+Tried (forgeries built from the stored certificates and from jobs solved here with solve_job;
+verify_any on the JSON text):
+
+- Every returned field (outside the certificates) of the triangulation, resection, homography
+  and bilinear examples solved today, five stratified views (form 2), a one-K direct stage with
+  both proofs asked, and the stored labelled reconstruction: up to 1,200 edits a document (a
+  number times 1.5, negated, plus 1, 0, 5e-324, null; a flag flipped or null; a text replaced or
+  "(proven)" appended; a member dropped). Accepted beyond classes 4 and 6: timings, counts of
+  nodes and leaves, a note, an estimate dropped (claims nothing), an interval widened or made
+  unbounded, entries below a K's diagonal as 0 or -0.0, a pose entry moved by 1e-17, a pooled
+  track's pool indices (documented), a direct summary's conic_status text, and a
+  reconstruction's stage figures (its initial pair, forward motion, focal rounds, radial k1,
+  thresholds: informational records, docs/certificate.md).
+- proven_reason (class 1): the writer's words with its fields changed; held: texts not the
+  writer's, reasons on stages not asked, the exact not_full and not_certified texts.
+- The form-2 rules: no_redundancy, at_range_edge (focal and aspect) dropped on solved scenes held;
+  few_degrees_of_freedom did not (class 2). A track's not_analysed held (review 63); the clock's
+  code did not (class 3), nor an autocalibration stage's not_analysed with no motion (class 5).
+- A reconstruction point's determinacy stated (held), a proven_reason on its calibration item
+  (not reachable: the reconstruction's stages and summary are closed records; an autocalibration
+  document built round its calibration certificate states the options an autocalibration job
+  with a proof asked would, so "metric_none" there cannot be told from a search that found
+  nothing without running it again: left).
+- Cost: a proven_reason of 10^7 digits (0.03 s, refused now).
+
 Found (each test failed on the code before its fix):
 
 1. A proof's reason in its writer's words says what the options and the stage deny: the stored
