@@ -38,6 +38,12 @@ TEMPLATES = {
     "direct_none": ("no dual of {what}'s interval programs proved an end (their solves stalled, or no safe bound was "
                     "above 0){after}"),
 }
+# The stratified metric stage's proof searches at most this long (kinds.autocalibration: the least of the
+# job's time limit, this and the time left), the number its "metric_none" reason states
+METRIC_PROOF_S = 20.0
+# The stages' determinacy analyses and the direct proof run this long past the job's time limit
+# (kinds.autocalibration_stages): the direct proof's deadline, which "direct_stopped" measures from
+ANALYSIS_GRACE_S = 2.0
 # Which a stage may state: the stratified metric stage's, the direct stage's
 STRATIFIED = ("not_full", "not_certified", "metric_late", "metric_no_level", "metric_failed", "metric_none")
 DIRECT = ("not_full", "not_certified", "direct_late", "direct_stopped", "direct_failed", "direct_none")
@@ -61,7 +67,7 @@ def reason(key: str, **fields) -> str:
 
 def _pattern(template: str) -> re.Pattern:
     parts = re.split(r"\{(\w+)\}", template)
-    return re.compile("".join(re.escape(part) if k % 2 == 0 else f"(?:{FIELDS[part]})"
+    return re.compile("".join(re.escape(part) if k % 2 == 0 else f"(?P<{part}>{FIELDS[part]})"
                               for k, part in enumerate(parts)))
 
 
@@ -73,3 +79,9 @@ def is_reason(text: object, keys: tuple[str, ...]) -> str | None:
     if not isinstance(text, str):
         return None
     return next((key for key in keys if PATTERNS[key].fullmatch(text)), None)
+
+
+def fields(text: str, key: str) -> dict[str, str]:
+    """The fields of ``text``, a reason of TEMPLATES[key] (is_reason), as written."""
+    found = PATTERNS[key].fullmatch(text)
+    return {} if found is None else found.groupdict()

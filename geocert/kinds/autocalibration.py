@@ -467,7 +467,8 @@ def stratified_item(parsed: Parsed, options: autocalibration_problem.Autocalibra
         if prove_intervals and why_not is None and metric_stage["determinacy"] is not None:
             left = math.inf if deadline is None else deadline - time.monotonic()
             why_not = proven_reasons.reason("metric_late") if left <= 0 else \
-                _prove_intervals(problem, result, metric_stage, proof, min(options.time_limit_s, 20.0, left))
+                _prove_intervals(problem, result, metric_stage, proof,
+                                 min(options.time_limit_s, proven_reasons.METRIC_PROOF_S, left))
             # the planes' regions are proved side by side whether or not the affine search finished
             left = math.inf if deadline is None else deadline - time.monotonic()
             if options.prove_intervals_over_planes and isinstance(affine_stage.get("determinacy"), dict) \

@@ -17,8 +17,9 @@ from geocert.verify.checks import verify_arrays
 # (its stages' limits), then stop (determinacy.within): a job whose stages ran to their limits
 # still says how well its data fix its answer (a critical motion, often why it is not certified),
 # and ends within a few seconds of its limit however many views it has (the analyses of 200 views
-# took some 0.7 s of CPU, outside any clock).
-ANALYSIS_GRACE_S = 2.0
+# took some 0.7 s of CPU, outside any clock). One number with the proven reasons' bound on the
+# seconds they state (the verifier reads it there).
+ANALYSIS_GRACE_S = proven_reasons.ANALYSIS_GRACE_S
 
 
 def unproven(full: bool, certified: bool, proof: dict | None, status: str) -> str | None:

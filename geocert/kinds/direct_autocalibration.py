@@ -149,7 +149,9 @@ def _prove_focal(setup: direct.DirectSetup, result, stage: dict, proof: dict, de
     try:
         found = prove(setup, result.Q, stage["cost"], increase, check)
     except direct_solve.Stopped:
-        return proven_reasons.reason("direct_stopped", seconds=time.monotonic() - started, what=what, after=after)
+        # where the limit ran out (the deadline, the job's limit and the grace past its start), not
+        # where a check noticed it: a number the verifier can bound by the options
+        return proven_reasons.reason("direct_stopped", seconds=deadline - started, what=what, after=after)
     except (ValueError, ArithmeticError, np.linalg.LinAlgError) as exc:
         return proven_reasons.reason("direct_failed", error=proven_reasons.error_name(exc), what=what, after=after)
     if found is None:

@@ -275,6 +275,7 @@ class AutocalibrationVerification(Verification):
         for index, (stage, claim) in enumerate(zip(stages, claims)):
             # every stage's estimate, analysed or stopped, certified or not, in its writer's words
             estimates.check_stage_words(stage.get("determinacy"), f"stages/{index}/determinacy")
+            estimates.check_defeated(stage.get("determinacy"), f"stages/{index}/determinacy")
             # why proven intervals asked for are null: the stage the writer proves (the metric or
             # the direct one), when the options asked, in its words (removed by estimates_of)
             options = certificate["options"]
@@ -283,12 +284,15 @@ class AutocalibrationVerification(Verification):
             estimates.check_proven_reason(
                 stage.get("determinacy"), f"stages/{index}/determinacy", asked,
                 proven_reasons.DIRECT if direct else proven_reasons.STRATIFIED, options.get("certificate") == "full",
-                claim.get("certified") is True and isinstance(claim.get("proof"), dict), stage.get("status"))
+                claim.get("certified") is True and isinstance(claim.get("proof"), dict), stage.get("status"),
+                _reason_fields(options, stage, direct))
             summary = stage.get("certificate")
             if claim.get("certified") is True and isinstance(summary, dict) and "scope" in summary \
                     and summary["scope"] != STAGE_SCOPES[names[index]]:
                 raise Invalid("returned", f"stages/{index}/certificate/scope is {summary['scope']!r:.120}, the scope its "
                                           f"proof covers is {STAGE_SCOPES[names[index]]!r:.120}")
+            if claim.get("certified") is not True and isinstance(summary, dict):
+                _check_uncertified_summary(summary, names[index], f"stages/{index}/certificate")
         _check_calibration_forms(result)
         if direct:
             if result.get("baseline") is not None:  # the direct method has no linear estimate
@@ -812,6 +816,38 @@ def _check_nothing_direct(result: dict, stages: list) -> None:
     if result.get("Ks") is not None:
         raise Invalid("returned", "Ks is stated: the stratified method returns one K (K), a K a view only the direct "
                                   "method's options.varying_focal writes")
+
+
+def _check_uncertified_summary(summary: dict, name: str, where: str) -> None:
+    """An uncertified stage's summary says what its search covered in its writer's words (the
+    stage's scope, or none: "" where the metric stage never ran, kinds.autocalibration) and its
+    tolerance is null or a number at least 0, as an uncertified track's or map's (docs/certificate.md):
+    "every plane at infinity chirality allows (proven)" and a tolerance of -1 verified on a stage
+    no proof backs (review 64 class 6)."""
+    if "scope" in summary and summary["scope"] not in (STAGE_SCOPES[name], ""):
+        raise Invalid("returned", f"{where}/scope is {summary['scope']!r:.120}: an uncertified stage states its "
+                                  f"search's words, {STAGE_SCOPES[name]!r:.80}, or none")
+    tolerance = summary.get("tolerance")
+    if tolerance is not None and not (is_number(tolerance) and tolerance >= 0):
+        raise Invalid("returned", f"{where}/tolerance is {tolerance!r:.40}: null or a number at least 0")
+
+
+def _reason_fields(options: dict, stage: dict, direct: bool) -> dict:
+    """What a stage's proof reason may say (estimates.check_reason_fields), from the options and the
+    stage as its writer reads them (kinds.direct_autocalibration._prove_focal: what and after;
+    kinds.autocalibration._prove_intervals: the level)."""
+    limit = options.get("time_limit_s")
+    limit = float(limit) if is_number(limit) and limit >= 0 else math.inf
+    if direct:
+        varying = bool(options.get("varying_focal"))
+        return {"what": proven_reasons.WHAT[1] if varying else proven_reasons.WHAT[0],
+                "after": proven_reasons.AFTER[1] if options.get("prove_intrinsics_intervals") and not varying
+                else proven_reasons.AFTER[0],
+                "seconds": limit + proven_reasons.ANALYSIS_GRACE_S}
+    determinacy = stage.get("determinacy") if isinstance(stage, dict) else None
+    return {"seconds": min(limit, proven_reasons.METRIC_PROOF_S),
+            "level": isinstance(determinacy, dict) and is_number(stage.get("cost"))
+            and is_number(determinacy.get("cost_increase"))}
 
 
 def _check_calibration_forms(result: dict) -> None:

@@ -856,6 +856,9 @@ def _check_returned(result: dict, certificate: dict, earlier_estimates: bool = T
                 raise Invalid("returned", f"{key}/{index}/{name} is {item.get(name)!r}, its certificate proves "
                                           f"{claim.get(name)!r}")
         _check_item_notes(item, f"{key}/{index}")
+        if key in REASONLESS_WHEN_CERTIFIED and item.get("certified") is True and item.get("reason") is not None:
+            raise Invalid("returned", f"{key}/{index}/reason is {item['reason']!r:.80} beside certified true: its "
+                                      "writer states a reason only for an item it does not certify (why not)")
     stats = result.get("stats")
     if isinstance(stats, dict):
         _check_item_notes({"nodes": stats.get("nodes")}, "stats")
@@ -943,6 +946,13 @@ def _check_stats(kind, result: dict) -> None:
 # (RFC 8259, section 6: readers commonly read numbers as IEEE 754 doubles). No search reaches it
 # (max_nodes is at most 1,000,000 an item); a Python reader would take 10**400 as it is written.
 MAX_COUNT = 2 ** 53 - 1
+
+
+# The items whose writers state a reason only where they do not certify (fractional.triangulation
+# and maps: refused_by_verifier's None, or the status's reason; bilinear.search: None when
+# certified): a certified track's "not certified: the search stopped; this point is not optimal"
+# verified (review 64 class 4), words a reader takes as the item's outcome.
+REASONLESS_WHEN_CERTIFIED = ("tracks", "maps", "frames")
 
 
 def _check_item_notes(item: dict, where: str) -> None:

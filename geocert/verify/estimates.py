@@ -29,8 +29,8 @@ from typing import Any
 
 import numpy as np
 
-from geocert.core.determinacy import (NO_REDUNDANCY_FORM, OWN_SCALE_FORM, Determinacy, certified_gap,
-                                      cost_increase as level_of, fixes, form, level_sigmas, safely)
+from geocert.core.determinacy import (FEWEST_DEGREES, NO_REDUNDANCY_FORM, OWN_SCALE_FORM, STUDENT_FORM, Determinacy,
+                                      certified_gap, cost_increase as level_of, fixes, form, level_sigmas, safely)
 from geocert.core import proven_reasons
 from geocert.core.geometry import is_number, normalised_cameras
 from geocert.core.warning_codes import MOTION_CODES
@@ -144,7 +144,7 @@ def check_determined(determinacy: dict, where: str, earlier: bool = True) -> Non
 
 
 def check_proven_reason(determinacy: Any, where: str, asked: bool, keys: tuple[str, ...], full: bool,
-                        proved: bool, status: Any) -> None:
+                        proved: bool, status: Any, own: dict | None = None) -> None:
     """A stage's ``proven_reason`` (why its proven intervals, asked for, are null) is its writer's:
     stated only where the options asked for a proof (``asked``: the stratified metric stage's with a
     full certificate, kinds.autocalibration; the direct stage's with prove_focal_interval or
@@ -153,7 +153,8 @@ def check_proven_reason(determinacy: Any, where: str, asked: bool, keys: tuple[s
     stage has no proof (``proved``: certified with a proof), exactly the one
     autocalibration_stages.unproven gives (the stage's own status); else one of the proof's own.
     A text reading as a proof ("proven: every intrinsic within 0.01%") is refused (review 63
-    class 2). A reason left out is not required (documents written before it was stated)."""
+    class 2). A reason left out is not required (documents written before it was stated). ``own``:
+    what the stage's options and figures give of a proof's reason (check_reason_fields)."""
     reason = determinacy.get("proven_reason") if isinstance(determinacy, dict) else None
     if reason is None:
         return
@@ -169,11 +170,35 @@ def check_proven_reason(determinacy: Any, where: str, asked: bool, keys: tuple[s
         expected = (proven_reasons.reason("not_certified", status=status),) if isinstance(status, str) else ()
     else:
         expected = None
-    if expected is not None and reason not in expected or expected is None and proven_reasons.is_reason(
-            reason, tuple(k for k in keys if k not in ("not_full", "not_certified"))) is None:
+    key = None if expected is not None else proven_reasons.is_reason(
+        reason, tuple(k for k in keys if k not in ("not_full", "not_certified")))
+    if expected is not None and reason not in expected or expected is None and key is None:
         raise Invalid("returned", f"{where}/proven_reason is {reason!r:.80}: not its writer's reason for this stage "
                                   "(core.proven_reasons: a full certificate's certified stage states why its proof "
                                   "found nothing; any other stage, why there is no proof to read)")
+    if key is not None and own is not None:
+        check_reason_fields(reason, key, own, where)
+
+
+def check_reason_fields(reason: str, key: str, own: dict, where: str) -> None:
+    """A proof's reason says of its proof only what the options and the stage give (review 64): the
+    proof it names (``what``: each view's focal length exactly with varying_focal) and whether the
+    other intrinsics' proofs were asked for (``after``: prove_intrinsics_intervals, one K), words
+    its writer takes from the options; its seconds no more than the search could have (``seconds``:
+    the stratified search's least of the time limit and METRIC_PROOF_S, the direct proof's time
+    limit and grace, to the rounding of "{:.3g}"); and ``metric_no_level`` only where the stage
+    states no cost or no cost increase (``level``: it states both), its writer's condition."""
+    found = proven_reasons.fields(reason, key)
+    for name in ("what", "after"):
+        if name in found and name in own and found[name] != own[name]:
+            raise Invalid("returned", f"{where}/proven_reason names {found[name]!r:.80} where its writer, from the "
+                                      f"options, names {own[name]!r:.80}")
+    if "seconds" in found and "seconds" in own and not float(found["seconds"]) <= own["seconds"] * (1.0 + 5e-3):
+        raise Invalid("returned", f"{where}/proven_reason states {found['seconds']} s; its proof ran at most "
+                                  f"{own['seconds']:.6g} s under the options")
+    if key == "metric_no_level" and own.get("level"):
+        raise Invalid("returned", f"{where}/proven_reason says the stage states no cost or no cost increase; it "
+                                  "states both")
 
 
 INTRINSICS = ("focal_x", "focal_y", "skew", "principal_u", "principal_v")  # autocalibration.determinacy.NAMES
@@ -190,6 +215,22 @@ def check_redundancy(determinacy: Any, expected: int, where: str) -> None:
     if not same(determinacy.get("redundancy"), expected):
         raise Invalid("returned", f"{where}/redundancy is {determinacy.get('redundancy')!r:.30}; the stage's "
                                   f"residuals beyond its parameters number {expected!r}")
+    check_few_degrees(determinacy, expected, where)
+
+
+def check_few_degrees(determinacy: dict, redundancy: int, where: str) -> None:
+    """In today's form (STUDENT_FORM on) a stage whose level is read off fewer than FEWEST_DEGREES
+    degrees of freedom of its own (the affine stage's modulus constraints of five views) states
+    ``few_degrees_of_freedom``, as its writer does (core.determinacy.few_degrees, from every
+    curvature estimate): without it the stage could claim ``determined`` from a noise estimated
+    from one residual (review 64: five views at 0.001, the affine stage restated determined)."""
+    if form() < STUDENT_FORM or not 0 < redundancy < FEWEST_DEGREES:
+        return
+    warnings = determinacy.get("warnings")
+    codes = [w.get("code") for w in warnings if isinstance(w, dict)] if isinstance(warnings, list) else []
+    if "few_degrees_of_freedom" not in codes:
+        raise Invalid("returned", f"{where}/warnings state no few_degrees_of_freedom: the stage's level is read off "
+                                  f"{redundancy} degree of freedom, which its writer warns of")
 
 
 def check_no_redundancy(determinacy: Any, redundancy: int, where: str) -> None:
@@ -356,6 +397,21 @@ def check_stage_words(determinacy: Any, where: str) -> None:
                                       f"its writer's {words!r:.60}")
 
 
+def check_defeated(determinacy: Any, where: str) -> None:
+    """An autocalibration stage stated not analysed because the data defeated its linear algebra
+    (a ``not_analysed`` first warning, no interval) is its writer's only beside the critical
+    motion it judged at the returned K (autocalibration.determinacy.with_motion): a failed analysis
+    with no motion to state is written null. Without one, the reason is no writer's, and it hid a
+    determined stage's intervals and warnings (review 64 class 5: a metric stage of five views so
+    restated verified)."""
+    if not isinstance(determinacy, dict) or not stopped(determinacy):
+        return
+    if determinacy["warnings"][0].get("code") == "not_analysed" and len(determinacy["warnings"]) == 1:
+        raise Invalid("returned", f"{where} is stated not analysed (the data defeated its linear algebra) with no "
+                                  "critical motion after it: its writer states that only beside the motion it judged, "
+                                  "and null otherwise")
+
+
 def check_pool(determinacy: Any, where: str) -> None:
     """An estimate no writer pools (a map's, a frame's, an autocalibration stage's: only a
     triangulation track's level is pooled over the job's tracks) names no pooled_tracks: one would
@@ -411,11 +467,11 @@ def _check_tracks(kind, result: dict, certificate: dict, earlier: bool = True) -
             continue
         where = f"tracks/{index}/determinacy"
         if stopped(determinacy):
-            # a time_limit no writer of tracks states and the verifier cannot judge; a not_analysed
-            # is no_level's, which says the residuals at the point returned are not finite
-            if determinacy["warnings"][0].get("code") == "not_analysed":
-                views = data["tracks"][index]["views"]
-                _check_no_level(where, item, cameras[views], np.asarray(data["tracks"][index]["points"], dtype=float))
+            # a not_analysed is no_level's, which says the residuals at the point returned are not
+            # finite; a time_limit no writer of tracks states (no clock stops a track's analysis)
+            _refuse_clock(where, determinacy, "a track's")
+            views = data["tracks"][index]["views"]
+            _check_no_level(where, item, cameras[views], np.asarray(data["tracks"][index]["points"], dtype=float))
             continue
         if item.get("point") is None:
             raise Invalid("returned", f"{where} is stated for a track returning no point (its writer states none)")
@@ -433,6 +489,16 @@ def _check_tracks(kind, result: dict, certificate: dict, earlier: bool = True) -
         # value 1e6 off the origin is 1e-3 px, thousands of widths, so the x, y and z intervals
         # collapsed onto their values, or moved with them off the returned point, verified
         _compare(where, determinacy, expected, earlier, width_slack=TRACK_WIDTH_SLACK, offsets=True, pooled=True)
+
+
+def _refuse_clock(where: str, determinacy: dict, whose: str) -> None:
+    """A stopped estimate's ``time_limit`` (core.determinacy.within: its clock ran out) is an
+    autocalibration stage's only: no clock stops a track's, map's or frame's analysis, so the code
+    there hides the estimate's intervals and warnings behind a false reason (review 64 class 3:
+    a determined track, map or frame so restated verified)."""
+    if determinacy["warnings"][0].get("code") == "time_limit":
+        raise Invalid("returned", f"{where} is stated stopped by its clock (time_limit): no clock stops {whose} "
+                                  "analysis, and its writer states its intervals")
 
 
 # A projection's depth this close to 0, relative to the sum of its terms' sizes, another order of
@@ -503,11 +569,11 @@ def _check_maps(kind, result: dict, certificate: dict, earlier: bool = True) -> 
     for index, item in enumerate(result.get("maps") or []):
         determinacy = item.get("determinacy") if isinstance(item, dict) else None
         where = f"maps/{index}/determinacy"
-        if isinstance(determinacy, dict) and stopped(determinacy) and determinacy["warnings"][0].get("code") == \
-                "not_analysed":  # a time_limit is not judged (no writer of maps states one either)
+        if isinstance(determinacy, dict) and stopped(determinacy):
+            _refuse_clock(where, determinacy, "a map's")
             raise Invalid("returned", f"{where} is stated not analysed: no writer of a map's estimate states that "
                                       "(map_ states its intervals, or none where the data defeat it)")
-        if not isinstance(determinacy, dict) or stopped(determinacy):
+        if not isinstance(determinacy, dict):
             continue
         if item.get("matrix") is None:
             raise Invalid("returned", f"{where} is stated for a map returning no matrix (its writer states none)")
@@ -589,9 +655,14 @@ def _check_frames(kind, result: dict, certificate: dict, earlier: bool = True) -
     read = kind.verification.read
     for index, item in enumerate(result.get("frames") or []):
         determinacy = item.get("determinacy") if isinstance(item, dict) else None
-        if not isinstance(determinacy, dict) or stopped(determinacy):
-            continue
         where = f"frames/{index}/determinacy"
+        if isinstance(determinacy, dict) and stopped(determinacy):
+            _refuse_clock(where, determinacy, "a frame's")
+            raise Invalid("returned", f"{where} is stated not analysed: no writer of a frame's estimate states that "
+                                      "(bilinear.determinacy.frame states its intervals, or none where the data "
+                                      "defeat it)")
+        if not isinstance(determinacy, dict):
+            continue
         if item.get("camera") is None or item.get("coefficients") is None:
             raise Invalid("returned", f"{where} is stated for a frame returning no camera (its writer states none)")
         basis, points = read(certificate["data"], index)
