@@ -293,9 +293,10 @@ def solve(residual, A, S, B, view, track, f_scale: float | None = None, max_iter
         WmT_gathered = blocks.gathered(WmT)
         ga = np.einsum("mki,mk->mi", je, rw)  # (M, c+s); einsum: faster than matmul on stacks of vectors
         gb = by_track(np.einsum("mki,mk->mi", jb, rw))
+        # the cameras' and shared parameters' gradient: the stopping test's and the step's predicted decrease
+        g_cameras = np.bincount(cam_cols.ravel(), weights=ga.ravel(), minlength=nc)
         if stop.gradient_tolerance > 0:
-            gradient = max(np.abs(np.bincount(cam_cols.ravel(), weights=ga.ravel(), minlength=nc)).max(initial=0.0),
-                           np.abs(gb).max(initial=0.0))
+            gradient = max(np.abs(g_cameras).max(initial=0.0), np.abs(gb).max(initial=0.0))
             if gradient <= stop.gradient_tolerance:
                 iterations -= 1  # no step computed
                 break
@@ -333,8 +334,7 @@ def solve(residual, A, S, B, view, track, f_scale: float | None = None, max_iter
                 # A step within the parameter tolerance ends the solve, taken: near an exact fit it
                 # is small against the parameters but not against what is left of the error.
                 converged = small or cost - cost_new <= stop.function_tolerance * cost
-                predicted = _predicted_decrease(np.bincount(cam_cols.ravel(), weights=ga.ravel(), minlength=nc), da,
-                                                gb, db, lam, diag_u, np.einsum("pii->pi", V))
+                predicted = _predicted_decrease(g_cameras, da, gb, db, lam, diag_u, np.einsum("pii->pi", V))
                 lam = _lowered(lam, (cost - cost_new) / predicted if predicted > 0 else 1.0)
                 raise_by = 2.0
                 A, S, B, r, cost = A_new, S_new, B_new, r_new, cost_new
