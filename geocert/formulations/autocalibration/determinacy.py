@@ -53,7 +53,8 @@ import numpy as np
 from geocert.formulations.autocalibration import frames
 from geocert.formulations.autocalibration import metric_relaxation
 from geocert.core.determinacy import (ASPECT_EDGE_FORM, OWN_SCALE_FORM, RELATIVE_WIDTH, SIGMAS, certified_gap, clip,
-                                      cost_increase, curvature_intervals, form, image_scale, interval, not_analysed,
+                                      cost_increase, curvature_intervals, form, image_scale, interval, level_sigmas,
+                                      not_analysed,
                                       numeric_jacobian, ranges_at, spread, sublevel_rays, tick)
 
 # Radians: rotations given exactly (a metric reconstruction's) carry no noise estimate, and are not
@@ -62,6 +63,7 @@ from geocert.core.determinacy import (ASPECT_EDGE_FORM, OWN_SCALE_FORM, RELATIVE
 # turntable, or any exact turntable perturbed by 0.5 degrees, was judged general. A caller that
 # knows its rotations' standard error passes it as ``noise``.
 ROTATION_NOISE = 1e-2
+VIEW_JACKKNIFE_FORM = 2  # the first form whose stratified K intervals hold the views' jackknife
 STILL_DEGREES = 3.0  # naming only: views turning less than this from the reference (median) translate
 AXIS = 0.15  # naming only: rotations whose axes fit one axis this well (_axis_fit) share it
 PATH = 0.1  # naming only: centres spread across their widest direction by less than this fraction lie on a path
@@ -638,6 +640,68 @@ def metric_walk(problem, p: np.ndarray, w: np.ndarray, gap: float | None) -> dic
                           for k, name in enumerate(NAMES)]}
 
 
+def _without_view(problem, p: np.ndarray, view: int) -> tuple[np.ndarray, int, np.ndarray] | None:
+    """The normalised cameras without ``view``, their reference and the plane (p, 1) in their frame:
+    the same frame unless ``view`` is the reference, else that of the remaining cameras' reference
+    (frames.reference_camera), the plane carried along (pi -> T^T pi)."""
+    cameras, reference = problem.norm.cameras, problem.norm.reference
+    kept = np.delete(cameras, view, axis=0)
+    if view != reference:
+        return kept, reference - (view < reference), p
+    r = frames.reference_camera(kept)
+    A, a = kept[r, :, :3], kept[r, :, 3]
+    try:
+        Ainv = np.linalg.inv(A)
+    except np.linalg.LinAlgError:
+        return None
+    T = np.eye(4)
+    T[:3, :3], T[:3, 3] = Ainv, -Ainv @ a
+    moved = kept @ T
+    moved /= np.linalg.norm(moved, axis=(1, 2))[:, None, None] / np.sqrt(3.0)
+    moved[r] = np.hstack([np.eye(3), np.zeros((3, 1))])
+    plane = T.T @ np.append(p, 1.0)
+    if not abs(plane[3]) > 1e-300:
+        return None
+    return moved, r, plane[:3] / plane[3]
+
+
+def view_jackknife(problem, p: np.ndarray, w: np.ndarray) -> np.ndarray | None:
+    """The delete-one-view jackknife's standard deviation of K's five NAMES (pixels): each view left
+    out in turn, the modulus fit and the metric fit redone from (p, w). The views, not the
+    residuals, are the independent units: every modulus and DIAC residual is written in the
+    reference view's frame, so that view's noise is common to them all and moves the estimate
+    without raising the cost, which a level from the residuals' own variance cannot see (on the
+    dino's hemisphere the estimate's spread over noise draws was twice the curvature's; docs/
+    kinds.md). None where a fit fails or fewer than five views remain."""
+    from scipy.optimize import least_squares
+
+    m = len(problem.norm.cameras)
+    if m - 1 < 5:
+        return None
+    samples = []
+    for view in range(m):
+        tick()
+        moved = _without_view(problem, p, view)
+        if moved is None:
+            return None
+        cameras, reference, q = moved
+        coef, _ = frames.modulus_coefficients(cameras, reference)
+        try:
+            q = least_squares(lambda x: frames.modulus_residuals(coef, x), q, method="lm", xtol=1e-12,
+                              ftol=1e-12).x
+            setup = metric_relaxation.setup_for(cameras, reference, q, problem.unit_ranges)
+            x = least_squares(lambda x: metric_relaxation.residuals(setup, x), w, method="lm", xtol=1e-12,
+                              ftol=1e-12).x
+        except (ValueError, np.linalg.LinAlgError):
+            return None
+        k = _K_of_w(problem, x)
+        if not np.all(np.isfinite(k)):
+            return None
+        samples.append(k)
+    samples = np.array(samples)
+    return np.sqrt((m - 1) / m * ((samples - samples.mean(axis=0)) ** 2).sum(axis=0))
+
+
 def metric_intervals(problem, p: np.ndarray, w: np.ndarray, gap: float | None, direct: bool = False) -> dict:
     """The metric stage's intervals at the plane p and omega entries w: the metric walk's and the
     plane family's (the modulus cost's, to its own noise level, the metric fit redone on each plane
@@ -658,6 +722,13 @@ def metric_intervals(problem, p: np.ndarray, w: np.ndarray, gap: float | None, d
     lo_p, hi_p = ranges_at(value, family["Ks"])
     lower_end = value - np.hypot(value - walk["lower"], value - lo_p)
     upper_end = value + np.hypot(walk["upper"] - value, hi_p - value)
+    # Form VIEW_JACKKNIFE_FORM on (the stratified method's): never narrower than the views'
+    # jackknife at the level's quantile of its m - 1 degrees of freedom (view_jackknife: the
+    # reference view's noise, which the walks cannot see)
+    jackknife = None if direct or form() < VIEW_JACKKNIFE_FORM else view_jackknife(problem, p, w)
+    if jackknife is not None:
+        reach = level_sigmas(len(problem.norm.cameras) - 1) * jackknife
+        lower_end, upper_end = np.minimum(lower_end, value - reach), np.maximum(upper_end, value + reach)
     unclipped = [interval(name, value[k], lower_end[k], upper_end[k], scales[k]) for k, name in enumerate(NAMES)]
     scope = (direct_scope_of if direct else scope_of)(problem)
     clipped = [clipped_to_scope(dict(found), *bounds) for found, bounds in zip(unclipped, scope)]
@@ -665,7 +736,7 @@ def metric_intervals(problem, p: np.ndarray, w: np.ndarray, gap: float | None, d
     # method's scope is its combination, no aspect range of its own
     aspect = None if direct else tuple(float(e) for e in problem.ranges["aspect"])
     cut = [cut for _, cut in clipped] + ([] if aspect is None else [aspect_cut(value, *aspect)])
-    return {"walk": walk, "family": family, "intervals": [found for found, _ in clipped],
+    return {"walk": walk, "family": family, "jackknife": jackknife, "intervals": [found for found, _ in clipped],
             "cut": cut, "unclipped": unclipped, "scope": scope, "aspect": aspect}
 
 

@@ -1,13 +1,13 @@
-"""What a stratified autocalibration's `determined` promises on real cameras (issue 37): 20 of
-the Middlebury dino's 363 ground-truth cameras over a hemisphere (f = 3310 px), moved to a random
+"""What a stratified autocalibration's intervals promise on real cameras (issue 37): 20 of the
+Middlebury dino's 363 ground-truth cameras over a hemisphere (f = 3310 px), moved to a random
 projective frame with 0.1 px of noise, autocalibrated with the defaults (the focal range widened
-to hold the truth). Of 12 such subsets (seeds 10 to 21) 10 metric stages are `determined`, and one
-of them (seed 16: f = 3347 px) holds neither the true focal length nor the principal point's u
-(missed by 1.59 and 1.23 of the intervals' half-widths, no warning); at 0.5 px the same subsets'
-intervals miss by the same share of their widths (seed 11 too), so the shortfall scales with the
-noise. The plane at infinity's family (the modulus cost walked to its level) gives most of the
-focal interval's width there (22 px of 23), so it is that family's extent which falls short.
-Not fixed: a strict xfail, so that a fix shows."""
+to hold the truth), 12 such subsets (seeds 10 to 21). Every modulus and DIAC residual is written in
+the reference view's frame, so that view's noise is common to them all and invisible to a level
+from the residuals' own variance: the estimate's spread over noise draws was twice what the
+intervals stated, and 3 of 55 bounded metric intervals missed the truth, two of them in a
+`determined` stage (seed 16: f = 3347 px, missed by 1.59 half-widths, u by 1.23). The metric
+stage's intervals now hold the delete-one-view jackknife at the level's quantile
+(determinacy.view_jackknife; docs/kinds.md has the measurement)."""
 
 from __future__ import annotations
 
@@ -33,22 +33,23 @@ def hemisphere() -> datasets.CalibratedViews:
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(strict=True, reason="issue 37: seed 16's determined metric stage misses the true focal length "
-                                       "(the plane family's extent falls short on real hemisphere subsets)")
-def test_a_determined_metric_stage_holds_the_truth():
+def test_every_bounded_metric_interval_holds_the_truth():
     views = hemisphere()
     K = views.K[0] / views.K[0][2, 2]
     truth = {"focal_x": K[0, 0], "focal_y": K[1, 1], "skew": K[0, 1], "principal_u": K[0, 2], "principal_v": K[1, 2]}
-    determined, missed = 0, []
+    determined, bounded, missed = 0, 0, []
     for seed in range(10, 22):
         chosen = views.subset(np.random.default_rng(seed).choice(363, 20, replace=False))
         scene = scenes.from_cameras(chosen.cameras, chosen.box, 0.1, seed=seed, image_size=chosen.image_size)
         result = solve_job({"kind": "autocalibration", "data": scene.job_data(),
                             "options": {"time_limit_s": 10, "intrinsics": {"focal": [1000.0, 6000.0]}}})
         document = result["stages"][1]["determinacy"]
-        if not document["determined"]:
-            continue
-        determined += 1
-        missed += [(seed, i["name"]) for i in document["intervals"]
-                   if not i["lower"] <= truth[i["name"]] <= i["upper"]]
-    assert determined >= 8 and missed == [], (determined, missed)
+        determined += document["determined"]
+        for found in document["intervals"]:
+            if found["lower"] is None or found["upper"] is None:
+                continue
+            bounded += 1
+            if not found["lower"] <= truth[found["name"]] <= found["upper"]:
+                missed.append((seed, found["name"], document["determined"]))
+    # intervals that still say something: bounded, and some stages narrow enough to be determined
+    assert missed == [] and bounded >= 50 and determined >= 2, (missed, bounded, determined)
