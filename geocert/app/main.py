@@ -57,9 +57,10 @@ class BodySizeLimit:
         await self.app(scope, limited_receive, guarded_send)
 
     async def _reject(self, scope, receive, send):
-        response = errors.problem(413, "Payload too large",
-                                  f"the request body exceeds the limit of {self.limit} bytes (GEOCERT_MAX_BODY_BYTES)",
-                                  headers={"Connection": "close"})
+        # named like every other refusal: the field (as the 400 for a body that is not JSON) and the route
+        reason = f"the request body exceeds the limit of {self.limit} bytes (GEOCERT_MAX_BODY_BYTES)"
+        response = errors.problem(413, "Payload too large", reason, errors=[{"field": "body", "reason": reason}],
+                                  instance=scope.get("path"), headers={"Connection": "close"})
         await response(scope, receive, send)
 
 
