@@ -528,6 +528,20 @@ class TestTheVerdictsWords:
             "return Truth.verdict({status: 'succeeded'}, arguments[0], 'points', true).lines.map(l => l.text);", result)
         return lines
 
+    def test_not_determined_sends_the_reader_to_warnings_only_when_there_are_some(self, page, tmp_path):
+        """A stereo pair's translation comes back undetermined with an empty warnings list: the
+        page said "see the warnings" of warnings that were not there."""
+        pair = {"certified": False, "status": "estimate", "translation_determined": False,
+                "determinacy": {"determined": False, "warnings": []}}
+        warned = dict(pair, determinacy={"determined": False, "warnings": [{"code": "orbital_motion", "detail": "a ring"}]})
+        self.verdict_of(page, tmp_path, {})
+        said = lambda result: page.execute_script(  # noqa: E731
+            "return Truth.verdict({status: 'succeeded'}, arguments[0], 'pairs', false).lines"
+            ".filter(l => l.kind === 'determined').map(l => l.text);", result)
+        quiet, loud = said({"pairs": [pair]}), said({"pairs": [warned]})
+        assert quiet and not any("see the warnings" in line for line in quiet), quiet
+        assert loud and all("see the warnings" in line for line in loud), loud
+
     def test_the_cameras_line_says_which_views_were_not_registered_and_what_not_run_means(self, page, tmp_path):
         lines = self.verdict_of(page, tmp_path, self.RESULT)
         cameras = next(line for line in lines if "cameras certified" in line)

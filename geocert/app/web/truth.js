@@ -199,10 +199,13 @@ const Truth = (() => {
         lines.push({level: "no", text: flagText(f.key, f.node), kind: "flag"});
       }
     }
+    // "see the warnings" only where the result carries some: a stereo pair's translation is
+    // undetermined with no warning, and the page sent the reader to look for one that is not there
+    const seeWarnings = found.warnings.length ? "; see the warnings" : "";
     for (const u of found.undetermined) {
       lines.push({level: "warn", kind: "determined",
                   text: `Not determined by the data: ${u.label ? u.label + " " : ""}${listNames(u.where)}` +
-                        " (the answer is one of many that fit as well; see the warnings)"});
+                        ` (the answer is one of many that fit as well${seeWarnings})`});
     }
     for (const w of found.warnings) {
       const detail = w.code === "views_not_registered" ? unregisteredDetail(result, w) : w.detail;
