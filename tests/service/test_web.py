@@ -541,6 +541,14 @@ class TestTheVerdictsWords:
         quiet, loud = said({"pairs": [pair]}), said({"pairs": [warned]})
         assert quiet and not any("see the warnings" in line for line in quiet), quiet
         assert loud and all("see the warnings" in line for line in loud), loud
+        # a certified stage not determined, no warning (the stratified example's metric stage):
+        # the headline said "read the warnings" too
+        stage = {"name": "metric", "certified": True, "status": "optimal", "determinacy": {"determined": False, "warnings": []}}
+        headline = lambda result: page.execute_script(  # noqa: E731
+            "return Truth.verdict({status: 'succeeded'}, arguments[0], 'stages', true).headline;", result)
+        assert "warnings" not in headline({"stages": [stage]}), headline({"stages": [stage]})
+        warned_stage = dict(stage, determinacy=warned["determinacy"])
+        assert "read the warnings" in headline({"stages": [warned_stage]})
 
     def test_the_cameras_line_says_which_views_were_not_registered_and_what_not_run_means(self, page, tmp_path):
         lines = self.verdict_of(page, tmp_path, self.RESULT)

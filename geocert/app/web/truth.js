@@ -228,7 +228,8 @@ const Truth = (() => {
                            : "Certified: every answer below is proven optimal within its tolerance.";
     } else if (allCertified) {
       level = "warn";
-      headline = `${cancelled}Certified optimum, but read the warnings: the data may not fix the answer.`;
+      headline = `${cancelled}Certified optimum, but read ${found.warnings.length ? "the warnings" : "what is not determined"}: ` +
+                 "the data may not fix the answer.";
     } else if (noneCertified && main) {
       level = "no";
       headline = `${cancelled}Not certified: no ${main.label.replace(/s$/, "")} has a proven bound within its tolerance.`;
