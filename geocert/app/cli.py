@@ -62,6 +62,13 @@ def cmd_solve(args: argparse.Namespace) -> int:
         print(json.dumps({"type": "about:blank", "title": "Unreadable job", "status": 400, "detail": str(exc)}),
               file=sys.stderr)
         return 2
+    except ValueError as exc:  # valid JSON, an integer longer than the parser converts (as the API answers it)
+        from geocert.app.errors import long_number_reason
+
+        reason = long_number_reason(exc)
+        print(json.dumps({"type": "about:blank", "title": "Invalid request", "status": 422, "detail": f"body: {reason}",
+                          "errors": [{"field": "body", "reason": reason}]}), file=sys.stderr)
+        return 2
     try:
         adapter = job_request_adapter(body)
         # The job's kind is loaded: what the process holds now (modules, the kind) lives as long as

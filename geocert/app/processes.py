@@ -99,6 +99,10 @@ def validated(model, body: bytes) -> tuple[Any, tuple | None]:
             return None, ("json", exc.pos, exc.msg)
         except UnicodeDecodeError as exc:  # not UTF-8 text (json.loads decodes bytes first)
             return None, ("json", exc.start, f"not UTF-8 ({exc.reason})")
+        except ValueError as exc:  # valid JSON, an integer longer than the parser converts: not a syntax error
+            from geocert.app.errors import long_number_reason
+
+            return None, ("input", "body", long_number_reason(exc))
         try:
             return model.validate_python(decoded), None
         except ValidationError as exc:  # under "body", the input left out

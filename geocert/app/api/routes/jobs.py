@@ -7,6 +7,7 @@ import asyncio
 import base64
 import contextlib
 import itertools
+import json
 import math
 import re
 from typing import Annotated
@@ -18,6 +19,7 @@ from fastapi.concurrency import run_in_threadpool
 from fastapi.routing import APIRoute
 from fastapi.sse import EventSourceResponse, ServerSentEvent
 from pydantic import ValidationError
+from starlette.exceptions import HTTPException
 from starlette.requests import ClientDisconnect
 
 from geocert.app.api.deps import (JobStoreDep, Owner, error_responses, get_async_redis, get_store,
@@ -28,7 +30,7 @@ from geocert.app import exports, processes, shape, streamed, submissions
 from geocert.app import job_submission
 from geocert.app.job_submission import _submit
 from geocert.jobs.collection import collector_held
-from geocert.app.errors import ApiProblem, is_json_media_type
+from geocert.app.errors import ApiProblem, is_json_media_type, long_number_reason
 from geocert.app.schemas import JOB_EXAMPLES, JOB_REQUEST, JOB_STATUSES, Job, JobList, JobRequest
 from geocert.core.geometry import InputError
 from geocert.workers.queue import loop_producer, loop_producer_tried, ready_loop_producer, withdraw_queued
@@ -70,7 +72,16 @@ class StreamedItemsRoute(APIRoute):
                 del body
             if self.endpoint is submit_job:
                 await read_in_one_pass(request)
-            return await handler(request)
+            try:
+                return await handler(request)
+            except HTTPException as exc:
+                # FastAPI's bare 400 for a body json.loads refused with a plain ValueError: valid
+                # JSON holding an integer longer than the parser converts, not a syntax error
+                cause = exc.__cause__
+                if exc.status_code == 400 and isinstance(cause, ValueError) and not isinstance(
+                        cause, (json.JSONDecodeError, UnicodeDecodeError)):
+                    raise InputError("body", long_number_reason(cause)) from None
+                raise
 
         return route_handler
 
