@@ -117,6 +117,16 @@ def test_a_refused_body_is_worded_as_the_two_passes_word_it(post):
     assert status == 415 and answer["errors"][0]["field"] == "content-type"
 
 
+def test_a_body_not_utf8_is_the_json_error_naming_the_body(post):
+    """Bytes that are not UTF-8 are answered as a body read in one of the API's processes answers
+    them (processes.validated): 400 naming the body, with the position; it was FastAPI's bare
+    "There was an error parsing the body", without a field."""
+    status, answer, received, _ = post(b"\xff" + json.dumps(_triangulation()).encode())
+    assert status == 400 and not received, answer
+    assert answer["errors"][0]["field"] == "body" and "not UTF-8" in answer["errors"][0]["reason"], answer
+    assert (answer["line"], answer["column"]) == (1, 1)
+
+
 def _variants() -> list[bytes]:
     """Valid and refused bodies where JSON text and Python objects could part: non-finite and
     huge numbers, integers where decimals go and back, booleans, duplicate members, escapes (a

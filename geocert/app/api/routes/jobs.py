@@ -75,11 +75,14 @@ class StreamedItemsRoute(APIRoute):
             try:
                 return await handler(request)
             except HTTPException as exc:
-                # FastAPI's bare 400 for a body json.loads refused with a plain ValueError: valid
-                # JSON holding an integer longer than the parser converts, not a syntax error
+                # FastAPI's bare 400 "There was an error parsing the body", without a field, for a
+                # body json.loads refused with a ValueError that is not a JSONDecodeError: bytes
+                # that are not UTF-8 (worded as a body read in a process words them), or valid JSON
+                # holding an integer longer than the parser converts (not a syntax error: 422)
                 cause = exc.__cause__
-                if exc.status_code == 400 and isinstance(cause, ValueError) and not isinstance(
-                        cause, (json.JSONDecodeError, UnicodeDecodeError)):
+                if exc.status_code == 400 and isinstance(cause, UnicodeDecodeError):
+                    processes.raise_carried(("json", cause.start, f"not UTF-8 ({cause.reason})"), request._body)
+                if exc.status_code == 400 and isinstance(cause, ValueError) and not isinstance(cause, json.JSONDecodeError):
                     raise InputError("body", long_number_reason(cause)) from None
                 raise
 
