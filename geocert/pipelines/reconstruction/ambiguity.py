@@ -22,10 +22,9 @@ refit's (``returned_refitted`` says whether it was run):
 The margin is there because real photos are not the model: an unmodelled lens distortion or a
 principal point held at the centre shifts costs by a few percent whatever the noise level, so a
 difference that small is not taken as evidence. Measured (the twin's cost over the returned one's):
-dinoSparseRing 1.20 with K unknown and 1.38 with K known, templeSparseRing 1.16 and 1.72 (1.21 and
-1.80 before schur.solve's damping followed its steps' gain ratio: the twin gets further in its
-capped iterations), the Oxford Corridor 4.10 and 1.40; a synthetic turntable seen from 1000 times
-its size through a 165,000 px lens 1.02 (0.3 px of noise). The twin's adjustments mostly stop at their iteration cap (the record's
+dinoSparseRing 1.21 with K unknown and 1.38 with K known, templeSparseRing 1.21 and 1.80, the Oxford
+Corridor 4.10 and 1.40; a synthetic turntable seen from 1000 times its size through a 165,000 px lens
+1.02 (0.3 px of noise). The twin's adjustments mostly stop at their iteration cap (the record's
 ``mirror_capped``); run to convergence they left every verdict measured as it was
 (bench/results/reconstruction_vs_colmap.md, "The twin's adjustments at their cap")."""
 

@@ -12,9 +12,7 @@ S, B_m)`` is vectorised over observations and returns (M, 2). Jacobians are cent
 differences, vectorised the same way (one perturbed copy per parameter coordinate).
 
 When to stop is ``StopRule``'s, Ceres Solver's three tests (Solver::Options function_tolerance,
-gradient_tolerance, parameter_tolerance) with Ceres's defaults; the iteration cap comes on top.
-The damping follows each step's gain ratio as Ceres's Levenberg-Marquardt strategy's does
-(``_lowered``; a step refused raises it by 2, 4, 8, ...)."""
+gradient_tolerance, parameter_tolerance) with Ceres's defaults; the iteration cap comes on top."""
 
 from __future__ import annotations
 
@@ -228,26 +226,6 @@ class _Blocks:
         return own + cross + cross.T
 
 
-def _predicted_decrease(g_cameras, da, g_points, db, lam, diag_u, diag_v) -> float:
-    """The cost's decrease (the cost being the sum of squares, no 1/2) that the linear model
-    predicts for the step h = (da, db) solving (J^T J + lam D) h = -g, D the diagonal of J^T J
-    (U's and V's): |r|^2 - |r + J h|^2 = -g.h + lam h^T D h, from the gradient g = J^T r
-    (the cameras' and shared parameters' ``g_cameras``, the points' ``g_points``), without J."""
-    return float(-(g_cameras @ da + np.sum(g_points * db)) + lam * (np.sum(diag_u * da * da)
-                                                                  + np.sum(diag_v * db * db)))
-
-
-def _lowered(lam: float, ratio: float) -> float:
-    """The damping after a step taken at gain ``ratio`` (the cost's decrease over the predicted):
-    Ceres Solver's Levenberg-Marquardt update (its trust region's radius is 1 / lam), Nielsen's
-    rule: lam max(1/3, 1 - (2 ratio - 1)^3), at least 1e-12. A third where the model predicted
-    the decrease (the former fixed rule), kept at ratio 1/2, up to doubled where the cost fell by
-    little of what was predicted: a damping lowered by a third after such a step had the next step
-    refused and retried about every other iteration (the depth-reversed twin's adjustments, 22 of
-    52 steps tried refused)."""
-    return max(lam * max(1 / 3, 1 - (2 * ratio - 1) ** 3), 1e-12)
-
-
 def solve(residual, A, S, B, view, track, f_scale: float | None = None, max_iterations: int = 50,
           stop: StopRule = CERES, jacobian=None, should_stop=None):
     """Minimise sum_m rho(|residual_m|^2) over A (n, c), S (s,), B (p, d); returns A, S, B,
@@ -268,7 +246,6 @@ def solve(residual, A, S, B, view, track, f_scale: float | None = None, max_iter
     r = residual(_rows(A, view), S, _rows(B, track))
     cost = _cost(r, f_scale)
     lam = 1e-3
-    raise_by = 2.0  # a step refused multiplies lam by this, which doubles each time until a step is taken
     iterations = 0
     for iterations in range(1, max_iterations + 1):
         if should_stop is not None and should_stop():
@@ -293,10 +270,9 @@ def solve(residual, A, S, B, view, track, f_scale: float | None = None, max_iter
         WmT_gathered = blocks.gathered(WmT)
         ga = np.einsum("mki,mk->mi", je, rw)  # (M, c+s); einsum: faster than matmul on stacks of vectors
         gb = by_track(np.einsum("mki,mk->mi", jb, rw))
-        # the cameras' and shared parameters' gradient: the stopping test's and the step's predicted decrease
-        g_cameras = np.bincount(cam_cols.ravel(), weights=ga.ravel(), minlength=nc)
         if stop.gradient_tolerance > 0:
-            gradient = max(np.abs(g_cameras).max(initial=0.0), np.abs(gb).max(initial=0.0))
+            gradient = max(np.abs(np.bincount(cam_cols.ravel(), weights=ga.ravel(), minlength=nc)).max(initial=0.0),
+                           np.abs(gb).max(initial=0.0))
             if gradient <= stop.gradient_tolerance:
                 iterations -= 1  # no step computed
                 break
@@ -334,15 +310,12 @@ def solve(residual, A, S, B, view, track, f_scale: float | None = None, max_iter
                 # A step within the parameter tolerance ends the solve, taken: near an exact fit it
                 # is small against the parameters but not against what is left of the error.
                 converged = small or cost - cost_new <= stop.function_tolerance * cost
-                predicted = _predicted_decrease(g_cameras, da, gb, db, lam, diag_u, np.einsum("pii->pi", V))
-                lam = _lowered(lam, (cost - cost_new) / predicted if predicted > 0 else 1.0)
-                raise_by = 2.0
                 A, S, B, r, cost = A_new, S_new, B_new, r_new, cost_new
+                lam = max(lam / 3, 1e-12)
                 break
             if small:
                 return A, S, B, r, iterations
-            lam *= raise_by
-            raise_by *= 2
+            lam *= 4
             if lam > 1e12:
                 return A, S, B, r, iterations
         if converged:
