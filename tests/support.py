@@ -36,6 +36,20 @@ def shared_data(name: str) -> Path:
     return path
 
 
+def dino_hemisphere_cameras():
+    """The Middlebury dino's 363 ground-truth cameras over a hemisphere (benchmark data, fetched by
+    `python -m bench.fetch_photo_sets --sets dinoCameras` into GEOCERT_BENCH_DATA, not among the
+    shared data): the calling test skips when they are absent, saying so."""
+    from geocert.solvers import datasets
+    from testing.photo_sets import data_root
+
+    folder = data_root() / "middlebury_dino_cameras"
+    if not folder.exists():
+        pytest.skip(f"{folder} is absent (the Middlebury dino's cameras: `python -m bench.fetch_photo_sets "
+                    "--sets dinoCameras` fetches them; GEOCERT_BENCH_DATA names the folder)")
+    return datasets.load_middlebury(folder)
+
+
 def dinosaur_sample(step: int) -> tuple[np.ndarray, list]:
     """The Oxford Dinosaur's cameras and every ``step``-th track (every length), as (views, points)."""
     from geocert.solvers.datasets import load_dinosaur

@@ -11,30 +11,17 @@ stage's intervals now hold the delete-one-view jackknife at the level's quantile
 
 from __future__ import annotations
 
-import os
-from pathlib import Path
-
 import numpy as np
 import pytest
 
 from geocert.jobs.runner import solve_job
-from geocert.solvers import datasets
 from geocert.solvers.autocalibration import scenes
-
-BENCH_DATA = Path(os.environ.get("GEOCERT_BENCH_DATA") or Path(__file__).resolve().parents[4] / "bench-data")
-
-
-def hemisphere() -> datasets.CalibratedViews:
-    folder = BENCH_DATA / "middlebury_dino_cameras"
-    if not folder.exists():
-        pytest.skip(f"{folder} is absent (the Middlebury dino's cameras: `python -m bench.fetch_photo_sets "
-                    "--sets dinoCameras` fetches them; GEOCERT_BENCH_DATA names the folder)")
-    return datasets.load_middlebury(folder)
+from tests.support import dino_hemisphere_cameras
 
 
 @pytest.mark.slow
 def test_every_bounded_metric_interval_holds_the_truth():
-    views = hemisphere()
+    views = dino_hemisphere_cameras()
     K = views.K[0] / views.K[0][2, 2]
     truth = {"focal_x": K[0, 0], "focal_y": K[1, 1], "skew": K[0, 1], "principal_u": K[0, 2], "principal_v": K[1, 2]}
     determined, bounded, missed = 0, 0, []

@@ -9,9 +9,6 @@ The verifier holds a form-2 document to the same level: one proven at 3^2 is ref
 
 from __future__ import annotations
 
-import os
-from pathlib import Path
-
 import numpy as np
 import pytest
 
@@ -20,21 +17,11 @@ from geocert.jobs.runner import solve_job
 from geocert.solvers import datasets
 from geocert.verify.checks import verify_any
 
-from tests.support import shared_data
+from tests.support import dino_hemisphere_cameras, shared_data
 
-BENCH_DATA = Path(os.environ.get("GEOCERT_BENCH_DATA") or Path(__file__).resolve().parents[4] / "bench-data")
 
 POINTS, NOISE_PX = 7, 0.1
 CHOSEN = range(60)  # the hemisphere's first 60 cameras: at 3^2, cameras 32, 36 and 40 missed
-
-
-def hemisphere() -> datasets.CalibratedViews:
-    """The Middlebury dino's 363 ground-truth cameras over a hemisphere (bench data)."""
-    folder = BENCH_DATA / "middlebury_dino_cameras"
-    if not folder.exists():
-        pytest.skip(f"{folder} is absent (the Middlebury dino's cameras: `python -m bench.fetch_photo_sets "
-                    "--sets dinoCameras` fetches them; GEOCERT_BENCH_DATA names the folder)")
-    return datasets.load_middlebury(folder)
 
 
 def resections(views: datasets.CalibratedViews, chosen) -> list[tuple[dict, np.ndarray]]:
@@ -71,7 +58,7 @@ def test_a_proven_box_holds_the_true_centre_wherever_the_estimate_does(monkeypat
     the depth rows are proven for all 60 whatever the points."""
     monkeypatch.setitem(globals(), "POINTS", points)
     missed, proven, rows = [], 0, 0  # missed: (resection, the estimate's level, the proven one)
-    for k, (job, centre) in enumerate(resections(hemisphere(), CHOSEN)):
+    for k, (job, centre) in enumerate(resections(dino_hemisphere_cameras(), CHOSEN)):
         d = solve_job(job)["maps"][0]["determinacy"]
         estimate = [next(i for i in d["intervals"] if i["name"] == q) for q in ("centre_x", "centre_y", "centre_z")]
         named = {i["name"]: i for i in (d["proven_intervals"] or {}).get("intervals", [])}
