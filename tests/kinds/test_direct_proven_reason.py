@@ -29,15 +29,20 @@ def solved(**options) -> dict:
                     "prove_intrinsics_intervals": True, "time_limit_s": 3600, **options}})))
 
 
-@pytest.fixture(scope="module")
-def stopped() -> dict:
-    """The proofs stopped by the job's deadline as soon as they start."""
+def solved_with_proofs_stopped(**options) -> dict:
+    """``solved(**options)`` with the proofs stopped by the job's deadline as soon as they start."""
     def at_the_deadline(*args, **kwargs):
         raise direct_solve.Stopped("time_limit", "the job's deadline")
 
     with pytest.MonkeyPatch.context() as patch:
         patch.setattr(direct_solve, "prove_focal", at_the_deadline)
-        return solved(certificate="full")
+        return solved(**options)
+
+
+@pytest.fixture(scope="module")
+def stopped() -> dict:
+    """The proofs stopped by the job's deadline as soon as they start."""
+    return solved_with_proofs_stopped(certificate="full")
 
 
 def test_a_proof_the_deadline_stopped_states_why_and_the_result_verifies(stopped):

@@ -128,15 +128,9 @@ def test_a_stratified_reason_the_stage_denies_is_refused(text):
 def direct_stopped() -> dict:
     """One K, both proofs asked, time_limit_s 3600: the focal proof stopped by the deadline at once
     (tests/kinds/test_direct_proven_reason's scene)."""
-    from geocert.solvers.autocalibration import direct_solve
-    from tests.kinds.test_direct_proven_reason import solved
+    from tests.kinds.test_direct_proven_reason import solved_with_proofs_stopped
 
-    def at_the_deadline(*args, **kwargs):
-        raise direct_solve.Stopped("time_limit", "the job's deadline")
-
-    with pytest.MonkeyPatch.context() as patch:
-        patch.setattr(direct_solve, "prove_focal", at_the_deadline)
-        return solved(certificate="full")
+    return solved_with_proofs_stopped(certificate="full")
 
 
 def test_the_direct_writers_stopped_reason_states_its_deadline_and_verifies(direct_stopped):
