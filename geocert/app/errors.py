@@ -128,8 +128,11 @@ def long_number_reason(exc: ValueError) -> str:
     """Why a body Python's JSON parser refused with a plain ValueError cannot be read: valid JSON
     (so not a syntax error, 400) holding an integer of more digits than ``int`` converts
     (sys.get_int_max_str_digits, a guard against quadratic conversion); no value the API takes
-    is written with so many. Answered 422 naming the body, as /v1/certificates/verify does."""
-    return f"the text cannot be read: {exc}".split("; use sys.set_int_max_str_digits", 1)[0]
+    is written with so many. Answered 422 naming the body, as /v1/certificates/verify does, in the
+    verifier's reader's words (core.strict.Unreadable), less Python's advice to raise the limit."""
+    from geocert.core.strict import Unreadable
+
+    return str(Unreadable(str(exc).split("; use sys.set_int_max_str_digits", 1)[0]))
 
 
 def is_json_media_type(value: str | None) -> bool:
