@@ -209,9 +209,12 @@ def check_autocalibration(job, truth, result):
         assert determinacy["warnings"] == []  # a general motion: nothing critical, nothing cut by a range
         assert determinacy["determined"] == all(fixes(i) for i in determinacy["intervals"])
         K_intervals = [i for i in determinacy["intervals"] if i["name"] in entries]
-        # the focal lengths fixed; six views' principal point need not be, within a tenth of half
-        # the image's side (the estimates' form 2)
-        assert all(fixes(i) for i in K_intervals if i["name"].startswith("focal"))
+        # the focal lengths bounded within a fifth of their value; since the stratified intervals
+        # hold the views' delete-one jackknife (form 2: the reference view's noise), six views fix
+        # neither them within a tenth (858 to 1143 px about 1000) nor the principal point
+        for found in (i for i in K_intervals if i["name"].startswith("focal")):
+            assert found["lower"] is not None and found["upper"] is not None, found
+            assert found["upper"] - found["lower"] < 0.4 * found["value"], found
         for found in K_intervals:  # every bounded interval holds the truth
             true = true_K[entries[found["name"]]]
             assert found["lower"] is None or found["lower"] <= true, found
